@@ -1,0 +1,1 @@
+"""Datasets, adapters and the multi-person scene corpus."""

@@ -1,0 +1,223 @@
+"""The unified 262-number per-person motion feature (InterHuman / InterGen layout).
+
+Per frame t of a person:
+
+=========  ===============================================================
+[0:66]     global joint positions (22 x 3), metres, Y up
+[66:132]   joint velocities: positions[t + 1] - positions[t] (22 x 3)
+[132:258]  local 6-D rotations of the 21 non-root joints (21 x 6)
+[258:262]  foot contacts: l_ankle, l_foot, r_ankle, r_foot (0/1)
+=========  ===============================================================
+
+As in InterGen, T joint frames give T - 1 feature frames (the velocity of the last
+frame is unknown). Scenes are *non-canonical*: everybody is expressed in person 1's
+canonical frame (person 1's first-frame pelvis above the origin, feet on the floor,
+facing +Z) and every other person keeps their real placement relative to person 1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import torch
+
+from umf.rotations import matrix_to_6d, sixd_to_matrix, yaw_matrix
+from umf.skeleton import (
+    FACE_JOINTS,
+    FOOT_LEFT,
+    FOOT_RIGHT,
+    MIRROR_PERM,
+    NUM_JOINTS,
+    inverse_kinematics,
+)
+
+Tensor = torch.Tensor
+
+FEATURE_DIM = 262
+POS = slice(0, 66)
+VEL = slice(66, 132)
+ROT = slice(132, 258)
+CONTACT = slice(258, 262)
+
+CONTACT_VELOCITY_THRESHOLD = 0.001  # squared per-frame displacement, m^2
+CONTACT_HEIGHT_THRESHOLDS = (0.12, 0.05)  # ankle, toe (m)
+
+
+# --------------------------------------------------------------------- pieces
+def foot_contacts(joints: Tensor) -> Tensor:
+    """Contact labels (T - 1, 4) from joints (T, 22, 3), InterGen's rule."""
+    out = []
+    for foot in (FOOT_LEFT, FOOT_RIGHT):
+        idx = list(foot)
+        disp2 = ((joints[..., 1:, idx, :] - joints[..., :-1, idx, :]) ** 2).sum(-1)
+        height = joints[..., :-1, idx, 1]
+        thr = torch.tensor(CONTACT_HEIGHT_THRESHOLDS, dtype=joints.dtype, device=joints.device)
+        out.append((disp2 < CONTACT_VELOCITY_THRESHOLD) & (height < thr))
+    return torch.cat(out, dim=-1).to(joints.dtype)
+
+
+def facing_direction(joints: Tensor) -> Tensor:
+    """Unit horizontal facing direction (..., 3) from hips and shoulders."""
+    r_hip, l_hip, r_sh, l_sh = FACE_JOINTS
+    across = (joints[..., r_hip, :] - joints[..., l_hip, :]) + (
+        joints[..., r_sh, :] - joints[..., l_sh, :]
+    )
+    up = torch.zeros_like(across)
+    up[..., 1] = 1.0
+    fwd = torch.cross(up, across, dim=-1)
+    fwd[..., 1] = 0.0
+    return fwd / fwd.norm(dim=-1, keepdim=True).clamp_min(1e-8)
+
+
+def heading_angle(joints: Tensor) -> Tensor:
+    """Yaw (rad) of the facing direction, 0 when facing +Z, positive towards +X."""
+    f = facing_direction(joints)
+    return torch.atan2(f[..., 0], f[..., 2])
+
+
+@dataclass(frozen=True)
+class RigidTransform:
+    """x' = R_y(yaw) @ (x - origin): the map into a canonical frame (yaw about +Y)."""
+
+    yaw: float
+    origin: tuple[float, float, float]
+
+    def apply(self, joints: Tensor) -> Tensor:
+        rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype))
+        origin = torch.tensor(self.origin, dtype=joints.dtype)
+        return (joints - origin) @ rot.T
+
+    def invert(self, joints: Tensor) -> Tensor:
+        rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype))
+        origin = torch.tensor(self.origin, dtype=joints.dtype)
+        return joints @ rot + origin
+
+
+def canonical_transform(joints: Tensor) -> RigidTransform:
+    """Transform that puts a person (T, 22, 3) in the canonical frame.
+
+    Floor: the lowest joint over the whole clip goes to y = 0. Origin: the first-frame
+    pelvis (XZ). Heading: the first-frame facing direction turns to +Z.
+    """
+    floor = float(joints[..., 1].min())
+    root = joints[0, 0]
+    yaw = float(heading_angle(joints[0]))
+    # rotating by -yaw about +Y brings the heading to +Z
+    return RigidTransform(yaw=-yaw, origin=(float(root[0]), floor, float(root[2])))
+
+
+def canonicalize_scene(joints: Tensor) -> tuple[Tensor, RigidTransform]:
+    """Express a scene (P, T, 22, 3) in person 1's canonical frame."""
+    tf = canonical_transform(joints[0])
+    return tf.apply(joints), tf
+
+
+def mirror_joints(joints: Tensor) -> Tensor:
+    """Left/right mirror: negate X and swap left and right joints."""
+    out = joints[..., list(MIRROR_PERM), :].clone()
+    out[..., 0] = -out[..., 0]
+    return out
+
+
+# --------------------------------------------------------------------- features
+def joints_to_features(joints: Tensor, local_rot: Tensor | None = None) -> Tensor:
+    """Joints (T, 22, 3) (+ local rotations (T, 22, 3, 3) when known) -> (T - 1, 262).
+
+    Without rotations they are recovered by inverse kinematics against offsets fitted to
+    this person (see :mod:`umf.skeleton`).
+    """
+    if joints.ndim != 3 or joints.shape[-2:] != (NUM_JOINTS, 3):
+        raise ValueError(f"expected joints (T, 22, 3), got {tuple(joints.shape)}")
+    if joints.shape[0] < 2:
+        raise ValueError("need at least 2 frames to compute velocities")
+    if local_rot is None:
+        local_rot = inverse_kinematics(joints)
+    t = joints.shape[0] - 1
+    pos = joints[:-1].reshape(t, 66)
+    vel = (joints[1:] - joints[:-1]).reshape(t, 66)
+    rot = matrix_to_6d(local_rot[:-1, 1:]).reshape(t, 126)
+    contacts = foot_contacts(joints)
+    return torch.cat([pos, vel, rot, contacts], dim=-1)
+
+
+def features_to_joints(features: Tensor) -> Tensor:
+    """(..., T, 262) -> global joints (..., T, 22, 3) (the position slots)."""
+    return features[..., POS].reshape(*features.shape[:-1], NUM_JOINTS, 3)
+
+
+def features_to_joints_integrated(features: Tensor) -> Tensor:
+    """Joints (..., T + 1, 22, 3): positions plus one more frame from the last velocity."""
+    pos = features_to_joints(features)
+    last = pos[..., -1:, :, :] + features[..., -1:, VEL].reshape(*pos.shape[:-3], 1, 22, 3)
+    return torch.cat([pos, last], dim=-3)
+
+
+def features_to_local_rotations(features: Tensor) -> Tensor:
+    """(..., T, 262) -> local rotation matrices (..., T, 21, 3, 3) of joints 1..21."""
+    d6 = features[..., ROT].reshape(*features.shape[:-1], NUM_JOINTS - 1, 6)
+    return sixd_to_matrix(d6)
+
+
+def mirror_features(features: Tensor) -> Tensor:
+    """Mirror features left/right without going back to joints.
+
+    Positions and velocities: negate X and swap sides. Rotations: conjugate by the
+    reflection M = diag(-1, 1, 1) (R' = M R M) and swap sides. Contacts: swap feet.
+    """
+    *lead, _ = features.shape
+    pos = mirror_joints(features[..., POS].reshape(*lead, NUM_JOINTS, 3))
+    vel = mirror_joints(features[..., VEL].reshape(*lead, NUM_JOINTS, 3))
+    rot = features_to_local_rotations(features)
+    m = torch.diag(torch.tensor([-1.0, 1.0, 1.0], dtype=features.dtype))
+    rot = m @ rot @ m
+    perm = [p - 1 for p in MIRROR_PERM[1:]]
+    rot = rot[..., perm, :, :]
+    contacts = features[..., CONTACT][..., [2, 3, 0, 1]]
+    return torch.cat(
+        [
+            pos.reshape(*lead, 66),
+            vel.reshape(*lead, 66),
+            matrix_to_6d(rot).reshape(*lead, 126),
+            contacts,
+        ],
+        dim=-1,
+    )
+
+
+# --------------------------------------------------------------------- normaliser
+@dataclass
+class Normalizer:
+    """Per-dimension mean / std over a training corpus, saved with the model."""
+
+    mean: Tensor
+    std: Tensor
+
+    @classmethod
+    def fit(cls, features: Tensor, min_std: float = 1e-2) -> Normalizer:
+        """From stacked feature frames (N, 262). Contacts stay unscaled (0/1 labels)."""
+        flat = features.reshape(-1, features.shape[-1]).double()
+        mean = flat.mean(0)
+        std = flat.std(0).clamp_min(min_std)
+        mean[CONTACT] = 0.0
+        std[CONTACT] = 1.0
+        return cls(mean.float(), std.float())
+
+    def normalize(self, x: Tensor) -> Tensor:
+        return (x - self.mean.to(x)) / self.std.to(x)
+
+    def denormalize(self, x: Tensor) -> Tensor:
+        return x * self.std.to(x) + self.mean.to(x)
+
+    def save(self, path) -> None:
+        from umf.io import save_tensors_atomic
+
+        save_tensors_atomic({"mean": self.mean, "std": self.std}, path)
+
+    @classmethod
+    def load(cls, path) -> Normalizer:
+        from safetensors.torch import load_file
+
+        d = load_file(str(path))
+        if set(d) != {"mean", "std"} or d["mean"].shape != (FEATURE_DIM,):
+            raise ValueError(f"{path}: not a umf normaliser file")
+        return cls(d["mean"], d["std"])
