@@ -22,6 +22,10 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".tmp", dir=path.parent)
     os.close(fd)
     tmp_path = Path(tmp)
+    # mkstemp makes 0600 files; give outputs the permissions a plain open() would
+    umask = os.umask(0)
+    os.umask(umask)
+    os.chmod(tmp_path, 0o666 & ~umask)
     try:
         yield tmp_path
         os.replace(tmp_path, path)
@@ -39,7 +43,9 @@ def write_json_atomic(path: str | os.PathLike, obj: Any) -> None:
     write_text_atomic(path, json.dumps(obj, indent=2, sort_keys=False) + "\n")
 
 
-def save_tensors_atomic(tensors: dict, path: str | os.PathLike, metadata: dict | None = None) -> None:
+def save_tensors_atomic(
+    tensors: dict, path: str | os.PathLike, metadata: dict | None = None
+) -> None:
     from safetensors.torch import save_file
 
     with atomic_path(path) as tmp:

@@ -62,9 +62,15 @@ def quat_to_matrix(q: Tensor) -> Tensor:
     w, x, y, z = q.unbind(-1)
     return torch.stack(
         [
-            1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y),
-            2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x),
-            2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y),
+            1 - 2 * (y * y + z * z),
+            2 * (x * y - w * z),
+            2 * (x * z + w * y),
+            2 * (x * y + w * z),
+            1 - 2 * (x * x + z * z),
+            2 * (y * z - w * x),
+            2 * (x * z - w * y),
+            2 * (y * z + w * x),
+            1 - 2 * (x * x + y * y),
         ],
         dim=-1,
     ).reshape(*q.shape[:-1], 3, 3)
@@ -181,8 +187,8 @@ def _axis_matrix(axis: str, angle_rad: Tensor) -> Tensor:
 def euler_to_matrix(angles_deg: Tensor, order: str) -> Tensor:
     """Intrinsic Euler angles (degrees, ``angles[..., i]`` about ``order[i]``) to matrices."""
     order = order.upper()
-    if len(order) != 3 or set(order) - set("XYZ"):
-        raise ValueError(f"invalid Euler order {order!r}")
+    if len(order) != 3 or set(order) != set("XYZ"):
+        raise ValueError(f"invalid Euler order {order!r} (need a permutation of XYZ)")
     rad = torch.deg2rad(angles_deg)
     m = _axis_matrix(order[0], rad[..., 0])
     for i in (1, 2):

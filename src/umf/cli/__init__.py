@@ -1,0 +1,1 @@
+"""The `umf` command line (typer), grouped by task."""

@@ -1,0 +1,390 @@
+"""The versioned training corpus: real clips, their split, composed scenes, normaliser.
+
+Layout of a corpus directory (``umf data prepare --out DIR``)::
+
+    manifest.json          format version, sources, per-split counts, seed, licence
+    clips.json             one entry per clip: id, source, split, captions, P, T, labels
+    clips.npz              joints of all clips, concatenated (sum P*T, 22, 3) float32
+    scenes.json            composed scene recipes per split (see umf.data.scenes)
+    normalizer.safetensors per-dimension mean/std of the 262-d features (train split)
+    cache/<source>-<fingerprint>.npz   per-source conversion cache (reused by re-runs)
+
+Scenes are stored as recipes and rebuilt exactly from the clips, so the corpus stays
+small. Everything derived from Bandai data is CC BY-NC 4.0.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import time
+from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from umf import __version__
+from umf.data.clip import FPS, MotionClip
+from umf.data.scenes import Actor, build_scene, compose_corpus
+from umf.errors import UMFError
+from umf.io import atomic_path, write_json_atomic
+from umf.representation import Normalizer, canonicalize_scene, joints_to_features
+
+FORMAT = "umf-corpus"
+FORMAT_VERSION = 1
+SPLITS = ("train", "val", "test")
+BANDAI_ATTRIBUTION = (
+    "Bandai-Namco-Research-Motiondataset, (c) 2022 Bandai Namco Research Inc., CC BY-NC 4.0; "
+    "Kobayashi et al., arXiv:2306.08861, 2023"
+)
+
+
+@dataclass
+class PrepareConfig:
+    """Settings of ``umf data prepare`` (also the defaults of the Python API)."""
+
+    seed: int = 1234
+    val_fraction: float = 0.1
+    test_fraction: float = 0.1
+    train_scenes: int = 3000
+    val_scenes: int = 200
+    test_scenes: int = 300
+    test_groups: int = 200
+    group_sizes: tuple[int, ...] = (3, 4, 5, 6)
+    normalizer_max_frames: int = 200_000
+
+
+# --------------------------------------------------------------------- splits
+def _hash01(text: str) -> float:
+    return int(hashlib.sha1(text.encode()).hexdigest()[:12], 16) / float(16**12)
+
+
+def assign_splits(
+    clips: list[dict[str, Any]], val_fraction: float, test_fraction: float
+) -> dict[str, str]:
+    """Split by source clip, stratified by (source, dataset, content), deterministic.
+
+    Clips whose dataset defines a split keep it. Within each stratum clips are ordered
+    by a hash of their id; each stratum of 3 or more gives at least one val and one test
+    clip, so every action is seen in the held-out scenes.
+    """
+    out: dict[str, str] = {}
+    strata: dict[tuple, list[str]] = {}
+    for c in clips:
+        if c.get("split") in SPLITS:
+            out[c["id"]] = c["split"]
+            continue
+        key = (c["source"], c.get("dataset"), c.get("content"))
+        strata.setdefault(key, []).append(c["id"])
+    for ids in strata.values():
+        ids = sorted(ids, key=_hash01)
+        n = len(ids)
+        n_test = max(1, round(test_fraction * n)) if n >= 3 else 0
+        n_val = max(1, round(val_fraction * n)) if n >= 3 else 0
+        for i, cid in enumerate(ids):
+            out[cid] = "test" if i < n_test else "val" if i < n_test + n_val else "train"
+    return out
+
+
+# --------------------------------------------------------------------- source cache
+def _fingerprint(path: Path) -> str:
+    """Cheap identity of an input (names, sizes, mtimes) to decide cache reuse."""
+    h = hashlib.sha1(f"{FORMAT_VERSION}|{path.resolve()}".encode())
+    files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
+    for p in files:
+        st = p.stat()
+        h.update(f"{p.relative_to(path.parent)}|{st.st_size}|{int(st.st_mtime)}".encode())
+    return h.hexdigest()[:16]
+
+
+def _save_clips(path: Path, clips: list[MotionClip]) -> None:
+    index = [
+        {
+            "id": c.id, "source": c.source, "split": c.split, "captions": c.captions,
+            "num_people": c.num_people, "num_frames": c.num_frames, **c.meta,
+        }
+        for c in clips
+    ]  # fmt: skip
+    joints = (
+        np.concatenate([c.joints.reshape(-1, 22, 3) for c in clips]).astype(np.float32)
+        if clips
+        else np.zeros((0, 22, 3), np.float32)
+    )
+    with atomic_path(path) as tmp, open(tmp, "wb") as fh:
+        np.savez(fh, joints=joints, index=np.array(json.dumps(index)))
+
+
+def _load_clips(path: Path) -> list[MotionClip]:
+    with np.load(path) as z:
+        joints = z["joints"]
+        index = json.loads(str(z["index"]))
+    out, pos = [], 0
+    for e in index:
+        p, t = e["num_people"], e["num_frames"]
+        j = joints[pos : pos + p * t].reshape(p, t, 22, 3)
+        pos += p * t
+        meta = {
+            k: v
+            for k, v in e.items()
+            if k not in {"id", "source", "split", "captions", "num_people", "num_frames"}
+        }
+        out.append(MotionClip(e["id"], e["source"], j, e["captions"], FPS, None, e["split"], meta))
+    return out
+
+
+def load_source(
+    name: str,
+    path: Path,
+    loader: Callable[[Path, list[tuple[str, str]]], Iterable[MotionClip]],
+    cache_dir: Path,
+    problems: list[tuple[str, str]],
+    progress: bool = True,
+) -> tuple[list[MotionClip], bool]:
+    """Clips of one source, converted once and cached; returns (clips, reused_cache)."""
+    cache = cache_dir / f"{name}-{_fingerprint(path)}.npz"
+    if cache.exists():
+        try:
+            return _load_clips(cache), True
+        except (OSError, ValueError, KeyError, json.JSONDecodeError):
+            cache.unlink(missing_ok=True)  # a broken cache is rebuilt, never trusted
+    clips: list[MotionClip] = []
+    for clip in tqdm(
+        loader(path, problems), desc=f"reading {name}", unit="clip", disable=not progress
+    ):
+        clips.append(clip)
+    _save_clips(cache, clips)
+    return clips, False
+
+
+def _bandai_loader(path: Path, problems: list[tuple[str, str]]) -> Iterator[MotionClip]:
+    from umf.data.bandai import load_bandai
+
+    return load_bandai(path, problems)
+
+
+def _humanml3d_loader(path: Path, problems: list[tuple[str, str]]) -> Iterator[MotionClip]:
+    from umf.data.humanml3d import load_humanml3d
+
+    return load_humanml3d(path, problems=problems)
+
+
+def _interhuman_loader(path: Path, problems: list[tuple[str, str]]) -> Iterator[MotionClip]:
+    from umf.data.interhuman import load_interhuman
+
+    return load_interhuman(path, problems=problems)
+
+
+LOADERS = {
+    "bandai": _bandai_loader,
+    "humanml3d": _humanml3d_loader,
+    "interhuman": _interhuman_loader,
+}
+
+
+# --------------------------------------------------------------------- corpus
+@dataclass
+class Corpus:
+    """A prepared corpus on disk: clips, splits, scene recipes and normaliser."""
+
+    root: Path
+    manifest: dict[str, Any]
+    clips: list[MotionClip]
+    scenes: dict[str, list[dict[str, Any]]]
+    _actors: dict[str, Actor] | None = field(default=None, repr=False)
+
+    @classmethod
+    def load(cls, root: str | Path) -> Corpus:
+        root = Path(root)
+        manifest_path = root / "manifest.json"
+        if not manifest_path.exists():
+            raise UMFError(f"{root}: not a umf corpus (no manifest.json); run `umf data prepare`")
+        try:
+            manifest = json.loads(manifest_path.read_text())
+            if manifest.get("format") != FORMAT:
+                raise UMFError(f"{manifest_path}: not a umf corpus manifest")
+            if manifest.get("version") != FORMAT_VERSION:
+                raise UMFError(
+                    f"{root}: corpus format v{manifest.get('version')}, this umf reads "
+                    f"v{FORMAT_VERSION}; run `umf data prepare` again"
+                )
+            clips = _load_clips(root / "clips.npz")
+            scenes = json.loads((root / "scenes.json").read_text())
+        except (OSError, ValueError, KeyError) as exc:
+            raise UMFError(f"{root}: corrupt corpus ({exc})") from exc
+        return cls(root, manifest, clips, scenes)
+
+    @property
+    def normalizer(self) -> Normalizer:
+        return Normalizer.load(self.root / "normalizer.safetensors")
+
+    def split_clips(self, split: str) -> list[MotionClip]:
+        return [c for c in self.clips if c.split == split]
+
+    def actors(self) -> dict[str, Actor]:
+        """Single-person clips in their canonical frame, keyed by id (built once)."""
+        if self._actors is None:
+            self._actors = {
+                c.id: Actor.from_joints(
+                    c.id, c.joints[0], c.meta.get("content", ""), c.meta.get("style", "")
+                )
+                for c in self.clips
+                if c.num_people == 1
+            }
+        return self._actors
+
+    def scene_joints(self, recipe: dict[str, Any]) -> np.ndarray:
+        return build_scene(recipe, self.actors())
+
+    def find(self, key: str) -> tuple[np.ndarray, str]:
+        """(joints (P, T, 22, 3), caption) of a clip id or scene id."""
+        for c in self.clips:
+            if c.id == key:
+                return c.joints, c.captions[0]
+        for recipes in self.scenes.values():
+            for r in recipes:
+                if r["id"] == key:
+                    return self.scene_joints(r), r["captions"][0]
+        raise UMFError(f"no clip or scene {key!r} in {self.root}")
+
+
+def _split_stats(clips: list[MotionClip], scenes: list[dict]) -> dict[str, Any]:
+    frames = sum(c.num_frames * c.num_people for c in clips)
+    scene_frames = sum(r["num_frames"] for r in scenes)
+    sizes: dict[str, int] = {}
+    relations: dict[str, int] = {}
+    for r in scenes:
+        sizes[str(r["num_people"])] = sizes.get(str(r["num_people"]), 0) + 1
+        relations[r["relation"]] = relations.get(r["relation"], 0) + 1
+    return {
+        "clips": len(clips),
+        "frames": frames,
+        "hours": round(frames / FPS / 3600, 3),
+        "scenes": len(scenes),
+        "scene_frames": scene_frames,
+        "scene_hours": round(scene_frames / FPS / 3600, 3),
+        "scenes_by_size": sizes,
+        "scenes_by_relation": relations,
+    }
+
+
+def fit_normalizer(
+    clips: list[MotionClip], scenes: list[np.ndarray], max_frames: int, seed: int
+) -> Normalizer:
+    """Mean/std of the features of train clips (canonical) and train scene persons."""
+    feats = []
+    for c in clips:
+        scene, _ = canonicalize_scene(torch.from_numpy(c.joints))
+        feats.extend(joints_to_features(p) for p in scene if p.shape[0] >= 2)
+    for s in scenes:
+        feats.extend(joints_to_features(p) for p in torch.from_numpy(s))
+    allf = torch.cat(feats)
+    if allf.shape[0] > max_frames:
+        g = torch.Generator().manual_seed(seed)
+        allf = allf[torch.randperm(allf.shape[0], generator=g)[:max_frames]]
+    return Normalizer.fit(allf)
+
+
+def prepare_corpus(
+    out: str | Path,
+    sources: dict[str, str | Path],
+    config: PrepareConfig | None = None,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Build (or reuse) a corpus in ``out`` from the given sources; returns the manifest."""
+    config = config or PrepareConfig()
+    out = Path(out)
+    if not sources:
+        raise UMFError("no data source given (use --bandai, --humanml3d or --interhuman)")
+    for name, path in sources.items():
+        if name not in LOADERS:
+            raise UMFError(f"unknown source {name!r}")
+        if not Path(path).exists():
+            raise UMFError(f"{name} data not found: {path}")
+    t0 = time.perf_counter()
+    out.mkdir(parents=True, exist_ok=True)
+    cache_dir = out / "cache"
+    problems: list[tuple[str, str]] = []
+    clips: list[MotionClip] = []
+    source_info = []
+    for name, path in sources.items():
+        got, reused = load_source(name, Path(path), LOADERS[name], cache_dir, problems, progress)
+        clips.extend(got)
+        source_info.append(
+            {"name": name, "path": str(path), "clips": len(got), "reused_cache": reused}
+        )
+        log(f"{name}: {len(got)} clips" + (" (cached)" if reused else ""))
+    for origin, reason in problems:
+        log(f"skipped {origin}: {reason}")
+    if not clips:
+        raise UMFError("no readable clip in the given sources")
+
+    index = [{"id": c.id, "source": c.source, "split": c.split, **c.meta} for c in clips]
+    splits = assign_splits(index, config.val_fraction, config.test_fraction)
+    for c in clips:
+        c.split = splits[c.id]
+
+    # scenes: two-person scenes per split, held-out groups of 3..6 from test clips
+    scenes: dict[str, list[dict]] = {}
+    counts = {"train": config.train_scenes, "val": config.val_scenes, "test": config.test_scenes}
+    singles = {s: [c for c in clips if c.split == s and c.num_people == 1] for s in SPLITS}
+    actors = {
+        s: [Actor.from_joints(c.id, c.joints[0], c.meta.get("content", ""), c.meta.get("style", ""))
+            for c in tqdm(singles[s], desc=f"actors {s}", disable=not progress, leave=False)]
+        for s in SPLITS
+    }  # fmt: skip
+    for i, s in enumerate(SPLITS):
+        scenes[s] = compose_corpus(actors[s], counts[s], (2,), seed=config.seed + i)
+        for r in scenes[s]:
+            r["id"] = f"{s}-{r['id']}"
+    groups = compose_corpus(
+        actors["test"], config.test_groups, config.group_sizes, seed=config.seed + 7
+    )
+    for r in groups:
+        r["id"] = f"group-{r['id']}"
+    scenes["test_groups"] = groups
+    log("scenes: " + ", ".join(f"{k} {len(v)}" for k, v in scenes.items()))
+
+    by_id = {a.id: a for s in SPLITS for a in actors[s]}
+    train_scene_joints = [build_scene(r, by_id) for r in scenes["train"]]
+    normalizer = fit_normalizer(
+        [c for c in clips if c.split == "train"], train_scene_joints,
+        config.normalizer_max_frames, config.seed,
+    )  # fmt: skip
+
+    _save_clips(out / "clips.npz", clips)
+    write_json_atomic(out / "clips.json", [
+        {"id": c.id, "source": c.source, "split": c.split, "captions": c.captions,
+         "num_people": c.num_people, "num_frames": c.num_frames, **c.meta}
+        for c in clips
+    ])  # fmt: skip
+    write_json_atomic(out / "scenes.json", scenes)
+    normalizer.save(out / "normalizer.safetensors")
+    stats = {s: _split_stats([c for c in clips if c.split == s], scenes.get(s, [])) for s in SPLITS}
+    stats["test_groups"] = _split_stats([], scenes["test_groups"])
+    manifest = {
+        "format": FORMAT,
+        "version": FORMAT_VERSION,
+        "umf_version": __version__,
+        "fps": FPS,
+        "seed": config.seed,
+        "config": {k: (list(v) if isinstance(v, tuple) else v) for k, v in vars(config).items()},
+        "sources": source_info,
+        "skipped": [{"file": o, "reason": r} for o, r in problems],
+        "splits": stats,
+        "total": {
+            "clips": len(clips),
+            "frames": sum(c.num_frames * c.num_people for c in clips),
+            "hours": round(sum(c.num_frames * c.num_people for c in clips) / FPS / 3600, 3),
+        },
+        "seconds": round(time.perf_counter() - t0, 1),
+        "license": "Derived from CC BY-NC 4.0 data where the source is Bandai: "
+        + BANDAI_ATTRIBUTION,
+        "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
+    }
+    write_json_atomic(out / "manifest.json", manifest)
+    return manifest

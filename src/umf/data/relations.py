@@ -1,0 +1,154 @@
+"""Machine-readable relations between people in a scene, and their checks.
+
+A scene's relation record lists constraints such as "person 0 faces person 1 at the
+start" or "person 1 is on person 0's left". The scene composer only keeps scenes whose
+own record checks true; the evaluation later runs the same checks on generated scenes.
+
+All checks take joints (P, T, 22, 3) in metres, Y up, and return a
+:class:`CheckResult` with the measured value, so reports can show *how* wrong a scene is.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from umf.skeleton import FACE_JOINTS
+
+FACING_TOLERANCE_DEG = 45.0
+SAME_HEADING_TOLERANCE_DEG = 35.0
+CONTACT_DISTANCE = 0.15  # m between any two joints of different people = walking through
+
+
+@dataclass(frozen=True)
+class CheckResult:
+    type: str
+    people: tuple[int, ...]
+    passed: bool
+    value: float
+    detail: str
+
+
+# --------------------------------------------------------------------- measures
+def facing_dirs(joints: np.ndarray) -> np.ndarray:
+    """Unit horizontal facing directions (..., 2) as (x, z) from hips and shoulders."""
+    r_hip, l_hip, r_sh, l_sh = FACE_JOINTS
+    across = (joints[..., r_hip, :] - joints[..., l_hip, :]) + (
+        joints[..., r_sh, :] - joints[..., l_sh, :]
+    )
+    # forward = up x across = (across_z, 0, -across_x)
+    fwd = np.stack([across[..., 2], -across[..., 0]], axis=-1)
+    return fwd / np.maximum(np.linalg.norm(fwd, axis=-1, keepdims=True), 1e-8)
+
+
+def root_xz(joints: np.ndarray) -> np.ndarray:
+    return joints[..., 0, [0, 2]]
+
+
+def _angle_deg(u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    un = u / np.maximum(np.linalg.norm(u, axis=-1, keepdims=True), 1e-8)
+    vn = v / np.maximum(np.linalg.norm(v, axis=-1, keepdims=True), 1e-8)
+    return np.degrees(np.arccos(np.clip((un * vn).sum(-1), -1.0, 1.0)))
+
+
+def facing_angle(joints: np.ndarray, a: int, b: int, frame: int = 0) -> float:
+    """Angle (deg) between a's facing direction and the direction from a to b."""
+    d = root_xz(joints[b, frame]) - root_xz(joints[a, frame])
+    return float(_angle_deg(facing_dirs(joints[a, frame]), d))
+
+
+def distance(joints: np.ndarray, a: int, b: int, frame: int = 0) -> float:
+    return float(np.linalg.norm(root_xz(joints[b, frame]) - root_xz(joints[a, frame])))
+
+
+def lateral_offset(joints: np.ndarray, a: int, b: int, frame: int = 0) -> tuple[float, float]:
+    """b's position in a's frame: (left, forward) metres (left = +X when facing +Z)."""
+    f = facing_dirs(joints[a, frame])  # (x, z)
+    left = np.array([f[1], -f[0]])  # facing +Z (0,1) -> left +X (1,0)
+    d = root_xz(joints[b, frame]) - root_xz(joints[a, frame])
+    return float(d @ left), float(d @ f)
+
+
+def min_interperson_distance(joints: np.ndarray) -> tuple[float, int, int, int]:
+    """Smallest distance between any joints of two different people: (d, a, b, frame)."""
+    best = (np.inf, -1, -1, -1)
+    p = joints.shape[0]
+    for a in range(p):
+        for b in range(a + 1, p):
+            diff = joints[a][:, :, None, :] - joints[b][:, None, :, :]  # (T, 22, 22, 3)
+            d = np.sqrt((diff**2).sum(-1)).min(axis=(1, 2))
+            t = int(d.argmin())
+            if d[t] < best[0]:
+                best = (float(d[t]), a, b, t)
+    return best
+
+
+def action_onset(joints: np.ndarray, fraction: float = 0.1) -> int:
+    """Frame at which a person's body motion (relative to the pelvis) really starts.
+
+    The first frame by which ``fraction`` of the clip's total pose motion has happened;
+    robust to mocap noise at rest, and cheap enough to run on every generated person.
+    """
+    local = joints - joints[:, :1, :]
+    speed = np.linalg.norm(np.diff(local, axis=0), axis=-1).sum(-1)
+    total = speed.sum()
+    if total <= 1e-8:
+        return 0
+    return int(np.searchsorted(np.cumsum(speed), fraction * total))
+
+
+# --------------------------------------------------------------------- checks
+def check(joints: np.ndarray, c: dict[str, Any]) -> CheckResult:
+    """Evaluate one constraint dict on a scene."""
+    kind = c["type"]
+    a, b = c.get("a", 0), c.get("b", 1)
+    frame = c.get("frame", 0)
+    if kind == "faces":
+        ang = facing_angle(joints, a, b, frame)
+        tol = c.get("tolerance_deg", FACING_TOLERANCE_DEG)
+        return CheckResult(kind, (a, b), ang <= tol, ang, f"P{a} faces P{b}: {ang:.0f} deg")
+    if kind == "faces_away":
+        ang = facing_angle(joints, a, b, frame)
+        tol = c.get("tolerance_deg", FACING_TOLERANCE_DEG)
+        ok = ang >= 180.0 - tol
+        return CheckResult(kind, (a, b), ok, ang, f"P{a} faces away from P{b}: {ang:.0f} deg")
+    if kind == "distance":
+        d = distance(joints, a, b, frame)
+        ok = c["min"] <= d <= c["max"]
+        return CheckResult(kind, (a, b), ok, d, f"P{a}-P{b} {d:.2f} m in [{c['min']}, {c['max']}]")
+    if kind == "side":
+        left, _ = lateral_offset(joints, a, b, frame)
+        ok = left > 0.2 if c["side"] == "left" else left < -0.2
+        return CheckResult(kind, (a, b), ok, left, f"P{b} on P{a}'s {c['side']}: {left:+.2f} m")
+    if kind == "order":  # a is ahead of b along a's heading
+        _, fwd = lateral_offset(joints, a, b, frame)
+        return CheckResult(kind, (a, b), fwd < -0.5, fwd, f"P{b} behind P{a}: {fwd:+.2f} m")
+    if kind == "same_heading":
+        ang = float(_angle_deg(facing_dirs(joints[a, frame]), facing_dirs(joints[b, frame])))
+        tol = c.get("tolerance_deg", SAME_HEADING_TOLERANCE_DEG)
+        return CheckResult(kind, (a, b), ang <= tol, ang, f"P{a}/P{b} heading {ang:.0f} deg")
+    if kind in ("approach", "retreat"):
+        d0, d1 = distance(joints, a, b, 0), distance(joints, a, b, joints.shape[1] - 1)
+        change = d1 - d0
+        need = c.get("min_change", 0.5)
+        ok = change <= -need if kind == "approach" else change >= need
+        return CheckResult(kind, (a, b), ok, change, f"P{a}-P{b} distance {d0:.2f}->{d1:.2f} m")
+    if kind == "starts_after":
+        oa, ob = action_onset(joints[a]), action_onset(joints[b])
+        lag = ob - oa
+        ok = lag >= c.get("min_frames", 8)
+        return CheckResult(kind, (a, b), ok, float(lag), f"P{b} starts {lag} frames after P{a}")
+    if kind == "no_contact":
+        d, pa, pb, t = min_interperson_distance(joints)
+        ok = d >= c.get("min_distance", CONTACT_DISTANCE)
+        return CheckResult(kind, (pa, pb), ok, d, f"closest joints {d:.2f} m (P{pa}/P{pb}, f{t})")
+    raise ValueError(f"unknown constraint type {kind!r}")
+
+
+def check_record(joints: np.ndarray, record: dict[str, Any]) -> list[CheckResult]:
+    """All constraints of a scene's relation record, evaluated on ``joints``."""
+    if joints.shape[0] != record["num_people"]:
+        raise ValueError(f"record has {record['num_people']} people, joints have {joints.shape[0]}")
+    return [check(joints, c) for c in record["constraints"]]

@@ -1,0 +1,365 @@
+"""P-Flow pyramid: resampling, windows, training sample, block noise, jump, sampler.
+
+The core check is Monte Carlo: given a fixed z1, the state right after the renoising
+jump must have the mean and covariance of the finer stage's training start point, and
+wrong constants must be caught by the same statistic.
+"""
+
+from __future__ import annotations
+
+import itertools
+import math
+from typing import Any
+
+import pytest
+import torch
+
+from umf.flows import (
+    Layout,
+    PyramidConfig,
+    block_noise_from_white,
+    default_steps,
+    down,
+    flow_matching_loss,
+    initial_noise,
+    jump,
+    jump_alpha,
+    jump_end,
+    pyramid_training_sample,
+    sample_pyramid,
+    stage_endpoints,
+    stage_windows,
+    up,
+)
+from umf.flows.pyramid import StageWindow
+
+F64 = torch.float64
+P, R = 16, 64
+MC = torch.float32  # Monte-Carlo dtype: fast, and z-scores are far above rounding
+
+
+def _gen(seed: int) -> torch.Generator:
+    return torch.Generator().manual_seed(seed)
+
+
+# ------------------------------------------------------------------ resampling
+@pytest.mark.parametrize("layout", ["1d", "2d"])
+def test_down_up_inverse(layout: Layout) -> None:
+    x = torch.randn(3, 4, 8, generator=_gen(0))  # 4 coarse tokens
+    assert torch.equal(down(up(x, layout), layout), x)
+    y = torch.randn(3, P, 8, generator=_gen(1))
+    proj = up(down(y, layout), layout)
+    torch.testing.assert_close(up(down(proj, layout), layout), proj)  # idempotent
+    assert down(y, layout).shape == (3, P // (2 if layout == "1d" else 4), 8)
+
+
+def test_multi_level_1d() -> None:
+    x = torch.randn(2, 4, 3, generator=_gen(2))
+    assert torch.equal(down(up(x, "1d", 2), "1d", 2), x)
+    y = torch.arange(16.0).reshape(1, 16, 1)
+    assert down(y, "1d", 2).flatten().tolist() == [1.5, 5.5, 9.5, 13.5]
+
+
+def test_2d_layout_is_row_major_grid() -> None:
+    y = torch.arange(16.0).reshape(1, 16, 1)  # token i at row i // 4, column i % 4
+    assert down(y, "2d").flatten().tolist() == [2.5, 4.5, 10.5, 12.5]
+    coarse = torch.tensor([0.0, 1.0, 2.0, 3.0]).reshape(1, 4, 1)
+    expected = [0, 0, 1, 1, 0, 0, 1, 1, 2, 2, 3, 3, 2, 2, 3, 3]
+    assert up(coarse, "2d").flatten().tolist() == expected
+
+
+# ------------------------------------------------------------------ constants
+def test_paper_constants_for_2x2_blocks() -> None:
+    for s in (0.1, 0.3, 0.5, 0.8):
+        assert math.isclose(jump_end(s, 1 / 3), 2 * s / (1 + s))
+        assert math.isclose(jump_alpha(s, 1 / 3), math.sqrt(3) * (1 - s) / 2)
+
+
+def test_constants_for_pairs() -> None:
+    s = 0.5
+    assert math.isclose(jump_alpha(s, 1.0), (1 - s) / math.sqrt(2))
+    assert math.isclose(jump_end(s, 1.0), math.sqrt(2) * s / (1 + (math.sqrt(2) - 1) * s))
+
+
+@pytest.mark.parametrize(
+    ("layout", "stages"), [("1d", 2), ("1d", 3), ("1d", 5), ("2d", 2), ("2d", 3)]
+)
+def test_windows_monotone(layout: Layout, stages: int) -> None:
+    cfg = PyramidConfig(layout=layout, num_stages=stages)
+    w = cfg.windows
+    assert [x.stage for x in w] == list(range(stages, 0, -1))
+    assert w[0].start == 0.0 and w[-1].end == 1.0
+    for a, b in itertools.pairwise(w):
+        assert 0 <= a.start < b.start < 1 and 0 < a.end < b.end <= 1
+        assert a.end > b.start  # a jump re-noises: windows overlap
+    assert all(x.start < x.end for x in w)
+
+
+def test_default_windows_two_stages() -> None:
+    w2 = PyramidConfig(layout="2d").windows
+    assert math.isclose(w2[0].end, 2 / 3) and w2[1].start == 0.5
+    w1 = PyramidConfig(layout="1d").windows
+    assert math.isclose(w1[0].end, 2 - math.sqrt(2))  # sqrt(2)/2 / (1 + (sqrt(2)-1)/2)
+
+
+def test_bad_settings_rejected() -> None:
+    with pytest.raises(ValueError):
+        PyramidConfig(layout="2d", g=1.0)  # Sigma' not PSD over 4 elements
+    with pytest.raises(ValueError):
+        PyramidConfig(layout="2d", num_stages=4)  # a 4x4 grid pools twice at most
+    with pytest.raises(ValueError):
+        stage_windows(2, 0.5, starts=(0.2, 0.5))
+    with pytest.raises(ValueError):
+        block_noise_from_white(torch.randn(2, 16, 1), "2d", 0.5)
+
+
+# ------------------------------------------------------------------ block noise
+@pytest.mark.parametrize(("layout", "g"), [("1d", 1.0), ("1d", 0.4), ("2d", 1 / 3), ("2d", 0.2)])
+def test_block_noise_covariance(layout: Layout, g: float) -> None:
+    z = torch.randn(20_000, P, 8, generator=_gen(3), dtype=F64)
+    n = block_noise_from_white(z, layout, g)
+    m = n.permute(0, 2, 1).reshape(-1, P)
+    cov = m.T @ m / m.shape[0]
+    b = 2 if layout == "1d" else 4
+    block_id = up(torch.arange(P // b, dtype=F64).reshape(1, -1, 1), layout).flatten()
+    same = block_id[:, None] == block_id[None, :]
+    expected = torch.where(same, torch.full_like(cov, -g), torch.zeros_like(cov))
+    expected.fill_diagonal_(1.0)
+    assert (cov - expected).abs().max().item() < 0.02
+
+
+# -------------------------------------------------------- the jump (Monte Carlo)
+def _jump_discrepancy(
+    layout: Layout,
+    s: float,
+    e: float,
+    alpha: float,
+    g: float,
+    *,
+    mean_scale: float | None = None,
+    n: int = 50_000,
+    width: int = 4,
+    seed: int = 0,
+) -> tuple[float, float, float]:
+    """Max |z-score| of the mean and covariance of the post-jump state vs the start point.
+
+    Returns (mean_z, cov_z, start_cov_z): the last one checks that the training start
+    point (Eq. 6) itself has the analytic target statistics, so the two distributions
+    agree. z-scores are errors divided by their Monte-Carlo standard deviation.
+    """
+    gen = _gen(seed)
+    z1 = torch.randn(1, P, width, generator=gen, dtype=MC)
+    coarse_w = StageWindow(stage=2, start=0.0, end=e)
+    fine_w = StageWindow(stage=1, start=s, end=1.0)
+    d = down(z1, layout)
+    eps_c = torch.randn(n, d.shape[1], width, generator=gen, dtype=MC)
+    z_end = stage_endpoints(d.expand(n, -1, -1), eps_c, coarse_w, layout)[1]  # Eq. 7, coarse
+    z_s = jump(z_end, s=s, e=e, alpha=alpha, layout=layout, g=g, generator=gen)
+    if mean_scale is not None:  # replace s/e by a wrong factor
+        z_s = z_s + (mean_scale - s / e) * up(z_end, layout)
+    eps_f = torch.randn(n, P, width, generator=gen, dtype=MC)
+    start = stage_endpoints(z1.expand(n, -1, -1), eps_f, fine_w, layout)[0]  # Eq. 6, fine
+
+    mean_target = s * up(d, layout)
+    cov_target = (1 - s) ** 2 * torch.eye(P, dtype=MC)
+    samples = n * width
+    cov_sd = (1 - s) ** 2 * torch.where(torch.eye(P, dtype=torch.bool), math.sqrt(2), 1.0)
+    cov_sd = cov_sd / math.sqrt(samples)
+
+    def zscores(x: torch.Tensor) -> tuple[float, float]:
+        dev = x - mean_target
+        mean_z = dev.mean(0).abs().max().item() / ((1 - s) / math.sqrt(n))
+        flat = dev.permute(0, 2, 1).reshape(-1, P)
+        cov = flat.T @ flat / samples
+        return mean_z, ((cov - cov_target).abs() / cov_sd).max().item()
+
+    mean_z, cov_z = zscores(z_s)
+    return mean_z, cov_z, zscores(start)[1]
+
+
+Z_OK = 6.0  # null: max |z| over the ~200 statistics was 2.6-4.4 across 24 seeds
+Z_FAIL = 15.0  # every wrong constant tried gives |z| > 40
+
+
+@pytest.mark.parametrize(
+    ("layout", "g", "s"),
+    [
+        ("1d", 1.0, 0.5),
+        ("1d", 1.0, 0.25),
+        ("2d", 1 / 3, 0.5),
+        ("2d", 1 / 3, 0.7),
+        ("2d", 0.2, 0.5),
+        ("1d", 0.5, 0.5),
+    ],
+)
+def test_jump_matches_training_start(layout: Layout, g: float, s: float) -> None:
+    e, alpha = jump_end(s, g), jump_alpha(s, g)
+    mean_z, cov_z, start_z = _jump_discrepancy(layout, s, e, alpha, g)
+    assert mean_z < Z_OK and cov_z < Z_OK and start_z < Z_OK, (mean_z, cov_z, start_z)
+
+
+def test_jump_wrong_alpha_detected() -> None:
+    for layout, g in (("1d", 1.0), ("2d", 1 / 3)):
+        s = 0.5
+        e, alpha = jump_end(s, g), jump_alpha(s, g)
+        for factor in (0.9, 1.1):
+            _, cov_z, _ = _jump_discrepancy(layout, s, e, factor * alpha, g)
+            assert cov_z > Z_FAIL, (layout, factor, cov_z)
+
+
+def test_jump_2x2_constants_with_pair_noise_detected() -> None:
+    """The paper's b = 4 constants on a 1-D pyramid (b = 2, default g = 1) are wrong."""
+    s = 0.5
+    _, cov_z, _ = _jump_discrepancy("1d", s, 2 * s / (1 + s), math.sqrt(3) * (1 - s) / 2, 1.0)
+    assert cov_z > Z_FAIL
+
+
+def test_jump_pair_constants_on_grid_detected() -> None:
+    s = 0.5
+    _, cov_z, _ = _jump_discrepancy("2d", s, jump_end(s, 1.0), jump_alpha(s, 1.0), 1 / 3)
+    assert cov_z > Z_FAIL
+
+
+def test_jump_paper_constants_with_g_02_detected() -> None:
+    """Sigma' with g = 0.2 needs its own e and alpha, not the g = 1/3 ones."""
+    s = 0.5
+    _, cov_z, _ = _jump_discrepancy("2d", s, 2 * s / (1 + s), math.sqrt(3) * (1 - s) / 2, 0.2)
+    assert cov_z > Z_FAIL
+
+
+def test_jump_wrong_mean_scale_detected() -> None:
+    s, g = 0.5, 1 / 3
+    mean_z, _, _ = _jump_discrepancy("2d", s, jump_end(s, g), jump_alpha(s, g), g, mean_scale=1.0)
+    assert mean_z > Z_FAIL
+
+
+def test_constants_depend_on_g_not_b() -> None:
+    """g = 1/3 is admissible for pairs too: its (e, alpha) work there (less efficiently)."""
+    s, g = 0.5, 1 / 3
+    mean_z, cov_z, _ = _jump_discrepancy("1d", s, jump_end(s, g), jump_alpha(s, g), g)
+    assert mean_z < Z_OK and cov_z < Z_OK
+
+
+# ------------------------------------------------------------------ training
+@pytest.mark.parametrize("layout", ["1d", "2d"])
+def test_training_sample_structure(layout: Layout) -> None:
+    cfg = PyramidConfig(layout=layout)
+    z1 = torch.randn(256, P, R, generator=_gen(4), dtype=F64)
+    smp = pyramid_training_sample(z1, cfg, generator=_gen(5))
+    assert smp.x.shape == smp.target.shape == z1.shape
+    assert smp.t.shape == smp.t_local.shape == smp.stage.shape == (256,)
+    assert smp.mask.shape == (256, P)
+    counts = torch.bincount(smp.stage, minlength=3)[1:]
+    assert counts.min().item() > 90  # both stages drawn
+    tl = smp.t_local[:, None, None]
+    start = smp.x - tl * smp.target
+    end = smp.x + (1 - tl) * smp.target
+    for w in cfg.windows:
+        sel = smp.stage == w.stage
+        n_tok = cfg.tokens(w.stage)
+        assert bool(smp.mask[sel, :n_tok].all()) and not bool(smp.mask[sel, n_tok:].any())
+        assert bool((smp.x[sel, n_tok:] == 0).all() and (smp.target[sel, n_tok:] == 0).all())
+        t = smp.t[sel]
+        assert bool(((t >= w.start) & (t <= w.end)).all())
+        torch.testing.assert_close(t, w.start + smp.t_local[sel] * (w.end - w.start))
+        st, en = start[sel, :n_tok], end[sel, :n_tok]
+        data = down(z1[sel], layout, w.level)
+        if w.stage == cfg.num_stages:  # coarsest: start is pure noise eps
+            torch.testing.assert_close(en - w.end * data, (1 - w.end) * st)
+        else:  # finest: ends at the data; start = s Up(Down z1) + (1 - s) eps
+            torch.testing.assert_close(en, data)
+            eps = (st - w.start * up(down(data, layout), layout)) / (1 - w.start)
+            assert abs(eps.std().item() - 1.0) < 0.02
+
+
+def test_training_sample_forced_stage_and_determinism() -> None:
+    cfg = PyramidConfig(layout="2d")
+    z1 = torch.randn(8, P, R, generator=_gen(6))
+    a = pyramid_training_sample(z1, cfg, stage=2, generator=_gen(7))
+    b = pyramid_training_sample(z1, cfg, stage=2, generator=_gen(7))
+    c = pyramid_training_sample(z1, cfg, stage=2, generator=_gen(8))
+    assert bool((a.stage == 2).all()) and int(a.mask.sum()) == 8 * 4
+    for f in ("x", "t", "target", "mask"):
+        assert torch.equal(getattr(a, f), getattr(b, f))
+    assert not torch.equal(a.x, c.x)
+    with pytest.raises(ValueError):
+        pyramid_training_sample(z1, cfg, stage=3)
+
+
+def test_loss_uses_mask() -> None:
+    cfg = PyramidConfig()
+    z1 = torch.randn(16, P, R, generator=_gen(9))
+    smp = pyramid_training_sample(z1, cfg, generator=_gen(10))
+    pred = smp.target + torch.where(smp.mask[..., None], 0.0, 1e3)
+    assert flow_matching_loss(pred, smp.target, smp.mask).item() == 0.0
+
+
+def test_no_pyramid_is_plain_flow_matching() -> None:
+    cfg = PyramidConfig(num_stages=1)
+    assert cfg.windows == (StageWindow(stage=1, start=0.0, end=1.0),)
+    z1 = torch.randn(4, P, R, generator=_gen(11))
+    smp = pyramid_training_sample(z1, cfg, generator=_gen(12))
+    assert bool(smp.mask.all()) and torch.equal(smp.t, smp.t_local)
+    t = smp.t[:, None, None]
+    torch.testing.assert_close(smp.x + (1 - t) * smp.target, z1)  # ends at the data
+    eps = smp.x - t * smp.target  # starts at pure noise
+    assert abs(eps.std().item() - 1.0) < 0.05 and abs(eps.mean().item()) < 0.05
+
+
+# ------------------------------------------------------------------ sampling
+def _delta_oracle(z1: torch.Tensor, cfg: PyramidConfig, seen: list[tuple[int, float]]) -> Any:
+    """Exact marginal velocity when the data distribution is a point mass at z1.
+
+    Inside stage k the state is m(t') + sigma(t') eps with
+    m = t' e D_k + (1 - t') s Up(Down(D_k)), sigma = t'(1-e) + (1-t')(1-s), so eps is
+    recoverable from the state and the velocity end - start is exact.
+    """
+
+    def v(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor) -> torch.Tensor:
+        k = int(stage[0])
+        w = cfg.window(k)
+        tl = float((t[0] - w.start) / (w.end - w.start))
+        seen.append((k, float(t[0])))
+        data = down(z1, cfg.layout, w.level)
+        coarse = up(down(data, cfg.layout), cfg.layout) if w.start > 0 else 0.0 * data
+        m = tl * w.end * data + (1 - tl) * w.start * coarse
+        sigma = tl * (1 - w.end) + (1 - tl) * (1 - w.start)
+        eps = (x - m) / sigma
+        return w.end * data - w.start * coarse + (w.start - w.end) * eps
+
+    return v
+
+
+@pytest.mark.parametrize(("layout", "stages"), [("1d", 2), ("2d", 2), ("1d", 3), ("1d", 1)])
+def test_sampler_with_oracle_recovers_data(layout: Layout, stages: int) -> None:
+    cfg = PyramidConfig(layout=layout, num_stages=stages)
+    z1 = torch.randn(3, P, 8, generator=_gen(13), dtype=F64)
+    seen: list[tuple[int, float]] = []
+    noise = initial_noise(cfg, 3, 8, generator=_gen(14), dtype=F64)
+    steps = default_steps(stages)
+    out = sample_pyramid(_delta_oracle(z1, cfg, seen), noise, cfg, steps=steps, generator=_gen(15))
+    assert out.x.shape == z1.shape and out.nfe == sum(steps) == len(seen)
+    torch.testing.assert_close(out.x, z1, atol=1e-9, rtol=0)
+    # the model saw the stages coarse -> fine, with times inside each window
+    assert [k for k, _ in seen] == sorted((k for k, _ in seen), reverse=True)
+    for k, t in seen:
+        w = cfg.window(k)
+        assert w.start - 1e-12 <= t <= w.end
+
+
+def test_sampler_steps_and_determinism() -> None:
+    cfg = PyramidConfig(layout="2d")
+    assert default_steps(2) == (45, 5)
+
+    def v(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor, scale: float) -> torch.Tensor:
+        return -scale * x
+
+    noise = initial_noise(cfg, 2, R, generator=_gen(16))
+    assert noise.shape == (2, 4, R)
+    a = sample_pyramid(v, noise, cfg, method="heun", generator=_gen(17), cond={"scale": 0.1})
+    b = sample_pyramid(v, noise, cfg, method="heun", generator=_gen(17), cond={"scale": 0.1})
+    c = sample_pyramid(v, noise, cfg, method="heun", generator=_gen(18), cond={"scale": 0.1})
+    assert a.x.shape == (2, P, R) and a.nfe == 2 * 50
+    assert torch.equal(a.x, b.x) and not torch.equal(a.x, c.x)
+    with pytest.raises(ValueError):
+        sample_pyramid(v, noise, cfg, steps=(10,), cond={"scale": 0.1})

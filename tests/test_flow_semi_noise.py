@@ -1,0 +1,162 @@
+"""S-Flow semi-noise joint path: state, targets, losses and the sampler."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+import torch
+
+from umf.flows import (
+    sample_semi_noise,
+    semi_noise_initial_state,
+    semi_noise_loss,
+    semi_noise_state,
+    semi_noise_training_sample,
+    split_halves,
+)
+
+F64 = torch.float64
+B, P, R = 4, 16, 64
+
+
+def _data(seed: int = 0, dtype: torch.dtype = torch.float32) -> tuple[torch.Tensor, ...]:
+    g = torch.Generator().manual_seed(seed)
+    c, w, eps = (torch.randn(B, P, R, generator=g, dtype=dtype) for _ in range(3))
+    return c, w, eps
+
+
+def test_state_shapes_and_layout() -> None:
+    c, w, eps = _data()
+    s = semi_noise_state(c, w, eps, torch.rand(B))
+    assert s.x.shape == s.target.shape == (B, P, 2 * R) and s.t.shape == (B,)
+    ctx_t, react_t = split_halves(s.target)
+    torch.testing.assert_close(ctx_t, c - eps)
+    torch.testing.assert_close(react_t, w - c)
+    r = semi_noise_state(c, w, eps, torch.rand(B), reaction_only=True)
+    assert r.x.shape == r.target.shape == (B, P, R)
+    torch.testing.assert_close(r.target, w - c)
+
+
+def test_endpoints() -> None:
+    c, w, eps = _data(1)
+    at0 = semi_noise_state(c, w, eps, torch.zeros(B)).x
+    at1 = semi_noise_state(c, w, eps, torch.ones(B)).x
+    assert torch.equal(at0, torch.cat([eps, c], -1))
+    assert torch.equal(at1, torch.cat([c, w], -1))
+    assert torch.equal(semi_noise_initial_state(c, noise=eps), at0)
+    assert torch.equal(semi_noise_initial_state(c, reaction_only=True), c)
+    only = semi_noise_state(c, w, eps, torch.zeros(B), reaction_only=True).x
+    assert torch.equal(only, c)
+
+
+@pytest.mark.parametrize("reaction_only", [False, True])
+def test_target_is_finite_difference(reaction_only: bool) -> None:
+    c, w, eps = _data(2, F64)
+    t = torch.tensor([0.05, 0.3, 0.6, 0.95], dtype=F64)
+    h = 1e-6
+
+    def state(tt: torch.Tensor) -> torch.Tensor:
+        return semi_noise_state(c, w, eps, tt, reaction_only=reaction_only).x
+
+    fd = (state(t + h) - state(t - h)) / (2 * h)
+    target = semi_noise_state(c, w, eps, t, reaction_only=reaction_only).target
+    torch.testing.assert_close(fd, target, atol=1e-8, rtol=0)
+
+
+def test_loss_weights_and_ablations() -> None:
+    c, w, eps = _data(3)
+    s = semi_noise_state(c, w, eps, torch.rand(B))
+    ctx_err = torch.zeros_like(c) + 1.0  # recon MSE 1
+    react_err = torch.zeros_like(c) + 2.0  # reaction MSE 4
+    pred = s.target + torch.cat([ctx_err, react_err], -1)
+    full = semi_noise_loss(pred, s.target, lambda_recon=0.5)
+    assert full.reaction.item() == pytest.approx(4.0)
+    assert full.recon.item() == pytest.approx(1.0)
+    assert full.total.item() == pytest.approx(4.5)
+    no_recon = semi_noise_loss(pred, s.target, lambda_recon=0.0)
+    assert no_recon.total.item() == pytest.approx(4.0)
+    r = semi_noise_state(c, w, eps, torch.rand(B), reaction_only=True)
+    only = semi_noise_loss(r.target + 2.0, r.target, reaction_only=True)
+    assert only.total.item() == pytest.approx(4.0) and only.recon.item() == 0.0
+
+
+def test_training_sample_determinism() -> None:
+    c, w, _ = _data(4)
+    a = semi_noise_training_sample(c, w, generator=torch.Generator().manual_seed(5))
+    b = semi_noise_training_sample(c, w, generator=torch.Generator().manual_seed(5))
+    d = semi_noise_training_sample(c, w, generator=torch.Generator().manual_seed(6))
+    assert torch.equal(a.x, b.x) and torch.equal(a.t, b.t)
+    assert not torch.equal(a.x, d.x)
+    ctx_x, react_x = split_halves(a.x)
+    tt = a.t[:, None, None]
+    torch.testing.assert_close(react_x, tt * w + (1 - tt) * c)
+    eps = (ctx_x - tt * c) / (1 - tt)  # the context half hides a standard normal
+    assert abs(eps.std().item() - 1.0) < 0.05
+    with pytest.raises(ValueError):
+        semi_noise_training_sample(c, w[:, :8])
+
+
+def _constant_oracle(
+    c: torch.Tensor, w: torch.Tensor, eps: torch.Tensor, reaction_only: bool
+) -> Any:
+    target = w - c if reaction_only else torch.cat([c - eps, w - c], -1)
+
+    def v(x: torch.Tensor, t: torch.Tensor, **_: Any) -> torch.Tensor:
+        return target.to(x.dtype)
+
+    return v
+
+
+def _state_oracle(c: torch.Tensor, w: torch.Tensor) -> Any:
+    """Velocity pointing from the current state to the known end point, (x1 - x)/(1 - t).
+
+    Depends on the state (unlike the constant oracle), yet keeps the straight path.
+    """
+    end = torch.cat([c, w], -1)
+
+    def v(x: torch.Tensor, t: torch.Tensor, **_: Any) -> torch.Tensor:
+        return (end - x) / (1 - t)[:, None, None]
+
+    return v
+
+
+@pytest.mark.parametrize("reaction_only", [False, True])
+@pytest.mark.parametrize("steps", [1, 10])
+def test_sampler_recovers_reaction_with_oracle(reaction_only: bool, steps: int) -> None:
+    c, w, eps = _data(7, F64)
+    out = sample_semi_noise(
+        _constant_oracle(c, w, eps, reaction_only),
+        c,
+        steps=steps,
+        noise=eps,
+        reaction_only=reaction_only,
+    )
+    assert out.x.shape == (B, P, R) and out.nfe == steps
+    torch.testing.assert_close(out.x, w, atol=1e-12, rtol=0)
+
+
+def test_sampler_state_dependent_oracle_euler() -> None:
+    c, w, eps = _data(8, F64)
+    out = sample_semi_noise(_state_oracle(c, w), c, steps=10, noise=eps)
+    assert out.nfe == 10
+    torch.testing.assert_close(out.x, w, atol=1e-12, rtol=0)
+
+
+def test_sampler_default_steps_and_determinism() -> None:
+    c, _, _ = _data(9)
+    seen: list[torch.Tensor] = []
+
+    def v(x: torch.Tensor, t: torch.Tensor, *, text: torch.Tensor) -> torch.Tensor:
+        seen.append(t)
+        assert x.shape == (B, P, 2 * R)
+        return -x.roll(R, dims=-1) * text  # couples the halves: noise reaches the reaction
+
+    cond = {"text": torch.tensor(0.5)}
+    a = sample_semi_noise(v, c, generator=torch.Generator().manual_seed(1), cond=cond)
+    b = sample_semi_noise(v, c, generator=torch.Generator().manual_seed(1), cond=cond)
+    d = sample_semi_noise(v, c, generator=torch.Generator().manual_seed(2), cond=cond)
+    assert a.nfe == 10 == len(seen) // 3
+    assert torch.equal(a.x, b.x) and not torch.equal(a.x, d.x)
+    h = sample_semi_noise(v, c, method="heun", steps=10, cond=cond)
+    assert h.nfe == 20

@@ -1,0 +1,94 @@
+import numpy as np
+import pytest
+
+from umf.data import scenes as S
+from umf.data.relations import check, check_record, facing_angle, min_interperson_distance
+
+
+@pytest.fixture(scope="module")
+def actors(bandai_clips):
+    return [
+        S.Actor.from_joints(c.id, c.joints[0], c.meta["content"], c.meta["style"])
+        for c in bandai_clips
+    ]
+
+
+def test_actor_is_canonical(actors):
+    for a in actors:
+        assert np.allclose(a.joints[0, 0, [0, 2]], 0.0, atol=1e-5)
+        assert abs(a.joints[..., 1].min()) < 1e-5
+
+
+def test_composer_is_deterministic_and_valid(actors):
+    a = S.compose_corpus(actors, 30, (2,), seed=5)
+    b = S.compose_corpus(list(reversed(actors)), 30, (2,), seed=5)
+    assert a == b
+    assert len(a) == 30
+    by_id = {x.id: x for x in actors}
+    relations = {r["relation"] for r in a}
+    assert len(relations) >= 8
+    for r in a:
+        j = S.build_scene(r, by_id)
+        assert j.shape == (2, r["num_frames"], 22, 3)
+        assert S.MIN_FRAMES <= r["num_frames"] <= S.MAX_FRAMES
+        results = check_record(j, r)
+        assert all(x.passed for x in results), (r["id"], [x.detail for x in results])
+        assert any(x.type == "no_contact" for x in results)
+        assert len(r["captions"]) >= 3
+        assert all(c[0].isupper() for c in r["captions"])
+    assert S.compose_corpus(actors, 30, (2,), seed=6) != a
+
+
+def test_groups(actors):
+    groups = S.compose_corpus(actors, 12, (3, 4, 5, 6), seed=1)
+    assert len(groups) == 12
+    assert {r["num_people"] for r in groups} <= {3, 4, 5, 6}
+    by_id = {x.id: x for x in actors}
+    for r in groups:
+        j = S.build_scene(r, by_id)
+        assert j.shape[0] == r["num_people"]
+        assert min_interperson_distance(j)[0] >= 0.15
+        words = {3: "three", 4: "four", 5: "five", 6: "six"}
+        assert any(
+            words[r["num_people"]] in c or words.get(r["num_people"] - 1, "") in c
+            for c in r["captions"]
+        )
+
+
+def test_captions_match_relation(actors):
+    by_id = {x.id: x for x in actors}
+    recipes = S.compose_corpus(actors, 40, (2,), seed=2)
+    for r in recipes:
+        j = S.build_scene(r, by_id)
+        if r["relation"] in ("greet", "bow_back", "mirror", "spar"):
+            assert facing_angle(j, 0, 1) < 45 and facing_angle(j, 1, 0) < 45
+        if r["relation"] == "bow_back":
+            assert check(j, {"type": "starts_after", "a": 0, "b": 1, "min_frames": 5}).passed
+            assert not check(j, {"type": "starts_after", "a": 1, "b": 0, "min_frames": 5}).passed
+        if r["relation"] == "mirror":
+            assert r["people"][0]["clip"] == r["people"][1]["clip"]
+            assert r["people"][1]["mirrored"]
+
+
+def test_checks_catch_violations(actors):
+    by_id = {x.id: x for x in actors}
+    recipe = next(
+        r for r in S.compose_corpus(actors, 20, (2,), seed=3) if r["relation"] == "greet"
+    )
+    j = S.build_scene(recipe, by_id)
+    # turning person 2 around breaks "faces"
+    bad = dict(recipe, people=[recipe["people"][0], dict(recipe["people"][1], yaw=0.0)])
+    jb = S.build_scene(bad, by_id)
+    assert not check(jb, {"type": "faces", "a": 1, "b": 0}).passed
+    # putting both on the same spot is caught as contact
+    same = dict(recipe, people=[recipe["people"][0], dict(recipe["people"][1], xz=[0.1, 0.0])])
+    assert not check(S.build_scene(same, by_id), {"type": "no_contact"}).passed
+    # side: moving person 2 from left to right flips the check
+    assert check(j, {"type": "distance", "a": 0, "b": 1, "min": 1.2, "max": 3.2}).passed
+
+
+def test_time_layout():
+    j = np.arange(10, dtype=np.float32)[:, None, None] * np.ones((1, 22, 3), np.float32)
+    out = S.time_layout(j, delay=3, start=2, length=12)
+    assert out.shape[0] == 12
+    assert np.all(out[:4, 0, 0] == 2) and out[4, 0, 0] == 3 and out[-1, 0, 0] == 9
