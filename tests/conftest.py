@@ -1,4 +1,4 @@
-"""Shared fixtures: the bundled real Bandai clips (tests/fixtures/bandai)."""
+"""Shared fixtures: the bundled real Bandai clips (data/bandai-sample)."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import pytest
 import torch
 
 FIXTURES = Path(__file__).parent / "fixtures"
-BANDAI_FIXTURE = FIXTURES / "bandai"
+BANDAI_FIXTURE = Path(__file__).resolve().parents[1] / "data" / "bandai-sample"
 SHARED_BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai"
 
 torch.set_num_threads(2)

@@ -72,9 +72,7 @@ def test_captions_match_relation(actors):
 
 def test_checks_catch_violations(actors):
     by_id = {x.id: x for x in actors}
-    recipe = next(
-        r for r in S.compose_corpus(actors, 20, (2,), seed=3) if r["relation"] == "greet"
-    )
+    recipe = next(r for r in S.compose_corpus(actors, 20, (2,), seed=3) if r["relation"] == "greet")
     j = S.build_scene(recipe, by_id)
     # turning person 2 around breaks "faces"
     bad = dict(recipe, people=[recipe["people"][0], dict(recipe["people"][1], yaw=0.0)])

@@ -126,18 +126,45 @@ def joints_to_features(joints: Tensor, local_rot: Tensor | None = None) -> Tenso
     Without rotations they are recovered by inverse kinematics against offsets fitted to
     this person (see :mod:`umf.skeleton`).
     """
+    _check_joints(joints)
+    if local_rot is None:
+        local_rot = inverse_kinematics(joints)
+    return assemble_features(joints, matrix_to_6d(local_rot[:, 1:]))
+
+
+def joints_to_rot6d(joints: Tensor) -> Tensor:
+    """Local 6-D rotations (T, 21, 6) of joints 1..21 by inverse kinematics.
+
+    They do not change when a person is moved or turned on the floor, so a corpus
+    computes them once per clip and reuses them for every placement.
+    """
+    _check_joints(joints)
+    return matrix_to_6d(inverse_kinematics(joints)[:, 1:])
+
+
+def assemble_features(joints: Tensor, rot6d: Tensor) -> Tensor:
+    """Joints (T, 22, 3) and local 6-D rotations (T, 21, 6) -> features (T - 1, 262)."""
+    _check_joints(joints)
+    t = joints.shape[0] - 1
+    pos = joints[:-1].reshape(t, 66)
+    vel = (joints[1:] - joints[:-1]).reshape(t, 66)
+    rot = rot6d[:-1].reshape(t, 126).to(joints.dtype)
+    return torch.cat([pos, vel, rot, foot_contacts(joints)], dim=-1)
+
+
+def mirror_rot6d(rot6d: Tensor) -> Tensor:
+    """Mirror local 6-D rotations (..., 21, 6): conjugate by diag(-1, 1, 1), swap sides."""
+    rot = sixd_to_matrix(rot6d)
+    m = torch.diag(torch.tensor([-1.0, 1.0, 1.0], dtype=rot6d.dtype))
+    perm = [p - 1 for p in MIRROR_PERM[1:]]
+    return matrix_to_6d((m @ rot @ m)[..., perm, :, :])
+
+
+def _check_joints(joints: Tensor) -> None:
     if joints.ndim != 3 or joints.shape[-2:] != (NUM_JOINTS, 3):
         raise ValueError(f"expected joints (T, 22, 3), got {tuple(joints.shape)}")
     if joints.shape[0] < 2:
         raise ValueError("need at least 2 frames to compute velocities")
-    if local_rot is None:
-        local_rot = inverse_kinematics(joints)
-    t = joints.shape[0] - 1
-    pos = joints[:-1].reshape(t, 66)
-    vel = (joints[1:] - joints[:-1]).reshape(t, 66)
-    rot = matrix_to_6d(local_rot[:-1, 1:]).reshape(t, 126)
-    contacts = foot_contacts(joints)
-    return torch.cat([pos, vel, rot, contacts], dim=-1)
 
 
 def features_to_joints(features: Tensor) -> Tensor:
@@ -167,17 +194,13 @@ def mirror_features(features: Tensor) -> Tensor:
     *lead, _ = features.shape
     pos = mirror_joints(features[..., POS].reshape(*lead, NUM_JOINTS, 3))
     vel = mirror_joints(features[..., VEL].reshape(*lead, NUM_JOINTS, 3))
-    rot = features_to_local_rotations(features)
-    m = torch.diag(torch.tensor([-1.0, 1.0, 1.0], dtype=features.dtype))
-    rot = m @ rot @ m
-    perm = [p - 1 for p in MIRROR_PERM[1:]]
-    rot = rot[..., perm, :, :]
+    rot = mirror_rot6d(features[..., ROT].reshape(*lead, NUM_JOINTS - 1, 6))
     contacts = features[..., CONTACT][..., [2, 3, 0, 1]]
     return torch.cat(
         [
             pos.reshape(*lead, 66),
             vel.reshape(*lead, 66),
-            matrix_to_6d(rot).reshape(*lead, 126),
+            rot.reshape(*lead, 126),
             contacts,
         ],
         dim=-1,

@@ -207,11 +207,12 @@ def matrix_to_euler(m: Tensor, order: str) -> Tensor:
     sign = 1.0 if (j - i) % 3 == 1 else -1.0
     # R = R_i(a) R_j(b) R_k(c): R[i, k] = sign * sin(b)
     sb = (sign * m[..., i, k]).clamp(-1.0, 1.0)
-    b = torch.asin(sb)
+    cb = torch.hypot(m[..., i, i], m[..., i, j])  # |cos(b)|, accurate near +-90 degrees
+    b = torch.atan2(sb, cb)
     a = torch.atan2(-sign * m[..., j, k], m[..., k, k])
     c = torch.atan2(-sign * m[..., i, j], m[..., i, i])
-    # gimbal lock: cos(b) ~ 0, put everything into a
-    lock = (1.0 - sb.abs()) < 1e-6
+    # gimbal lock: cos(b) ~ 0, a and c share one axis; put everything into a
+    lock = cb < (1e-6 if m.dtype == torch.float32 else 1e-12)
     a_lock = torch.atan2(sign * m[..., k, j], m[..., j, j])
     a = torch.where(lock, a_lock, a)
     c = torch.where(lock, torch.zeros_like(c), c)

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from umf.data.bvh import forward_kinematics, read_bvh
+from umf.data.bvh import forward_kinematics, parse_bvh
 from umf.data.clip import FPS, MotionClip
 from umf.errors import UMFError
 
@@ -289,7 +289,7 @@ def load_clip(f: BandaiFile, n_captions: int = 4) -> MotionClip:
     labels = _parse_name(f.name)
     if f.label is not None and not {"content", "style"} <= set(f.label):
         raise UMFError(f"{f.origin}: JSON label lacks content/style")
-    bvh = read_bvh(io.TextIOWrapper(io.BytesIO(f.bvh), encoding="utf-8", errors="replace"))
+    bvh = parse_bvh(f.bvh.decode("utf-8", errors="replace"), f.origin)
     missing = {n for s in SMPL_FROM_BANDAI for n in ((s,) if isinstance(s, str) else s)} - set(
         bvh.names
     )

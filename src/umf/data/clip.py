@@ -21,6 +21,8 @@ class MotionClip:
         captions: natural-language descriptions of the whole clip (several).
         fps: frame rate (30 after every adapter).
         rotations: (P, T, 22, 3, 3) local rotations when the source has them.
+        rot6d: (P, T, 21, 6) local 6-D rotations of joints 1..21 as used in the
+            features (filled by the corpus, from ``rotations`` or inverse kinematics).
         split: the dataset's own split ("train"/"val"/"test") if it defines one.
         meta: free-form labels (content, style, source file, ...).
     """
@@ -31,6 +33,7 @@ class MotionClip:
     captions: list[str]
     fps: float = FPS
     rotations: np.ndarray | None = None
+    rot6d: np.ndarray | None = None
     split: str | None = None
     meta: dict = field(default_factory=dict)
 

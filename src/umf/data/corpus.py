@@ -29,13 +29,20 @@ from tqdm import tqdm
 
 from umf import __version__
 from umf.data.clip import FPS, MotionClip
-from umf.data.scenes import Actor, build_scene, compose_corpus
+from umf.data.scenes import Actor, build_scene, build_scene_features, compose_corpus
 from umf.errors import UMFError
 from umf.io import atomic_path, write_json_atomic
-from umf.representation import Normalizer, canonicalize_scene, joints_to_features
+from umf.representation import (
+    Normalizer,
+    assemble_features,
+    canonicalize_scene,
+    joints_to_rot6d,
+)
+from umf.rotations import matrix_to_6d
 
 FORMAT = "umf-corpus"
 FORMAT_VERSION = 1
+CACHE_VERSION = 2  # bump when the per-source conversion changes
 SPLITS = ("train", "val", "test")
 BANDAI_ATTRIBUTION = (
     "Bandai-Namco-Research-Motiondataset, (c) 2022 Bandai Namco Research Inc., CC BY-NC 4.0; "
@@ -69,8 +76,8 @@ def assign_splits(
     """Split by source clip, stratified by (source, dataset, content), deterministic.
 
     Clips whose dataset defines a split keep it. Within each stratum clips are ordered
-    by a hash of their id; each stratum of 3 or more gives at least one val and one test
-    clip, so every action is seen in the held-out scenes.
+    by a hash of their id; a stratum of 2 or more gives at least one test clip and one of
+    3 or more also a val clip, so (nearly) every action appears in held-out scenes.
     """
     out: dict[str, str] = {}
     strata: dict[tuple, list[str]] = {}
@@ -83,7 +90,8 @@ def assign_splits(
     for ids in strata.values():
         ids = sorted(ids, key=_hash01)
         n = len(ids)
-        n_test = max(1, round(test_fraction * n)) if n >= 3 else 0
+        # rare actions (2 takes) still get one held-out take, so test scenes cover them
+        n_test = max(1, round(test_fraction * n)) if n >= 2 else 0
         n_val = max(1, round(val_fraction * n)) if n >= 3 else 0
         for i, cid in enumerate(ids):
             out[cid] = "test" if i < n_test else "val" if i < n_test + n_val else "train"
@@ -93,7 +101,7 @@ def assign_splits(
 # --------------------------------------------------------------------- source cache
 def _fingerprint(path: Path) -> str:
     """Cheap identity of an input (names, sizes, mtimes) to decide cache reuse."""
-    h = hashlib.sha1(f"{FORMAT_VERSION}|{path.resolve()}".encode())
+    h = hashlib.sha1(f"{FORMAT_VERSION}.{CACHE_VERSION}|{path.resolve()}".encode())
     files = [path] if path.is_file() else sorted(p for p in path.rglob("*") if p.is_file())
     for p in files:
         st = p.stat()
@@ -109,30 +117,39 @@ def _save_clips(path: Path, clips: list[MotionClip]) -> None:
         }
         for c in clips
     ]  # fmt: skip
-    joints = (
-        np.concatenate([c.joints.reshape(-1, 22, 3) for c in clips]).astype(np.float32)
-        if clips
-        else np.zeros((0, 22, 3), np.float32)
-    )
+    joints = _concat([c.joints.reshape(-1, 22, 3) for c in clips], (22, 3))
+    arrays = {"joints": joints, "index": np.array(json.dumps(index))}
+    if clips and all(c.rot6d is not None for c in clips):
+        arrays["rot6d"] = _concat([c.rot6d.reshape(-1, 21, 6) for c in clips], (21, 6))
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
-        np.savez(fh, joints=joints, index=np.array(json.dumps(index)))
+        np.savez(fh, **arrays)
+
+
+def _concat(arrays: list[np.ndarray], tail: tuple[int, ...]) -> np.ndarray:
+    if not arrays:
+        return np.zeros((0, *tail), np.float32)
+    return np.concatenate(arrays).astype(np.float32)
 
 
 def _load_clips(path: Path) -> list[MotionClip]:
     with np.load(path) as z:
         joints = z["joints"]
+        rot6d = z["rot6d"] if "rot6d" in z else None
         index = json.loads(str(z["index"]))
     out, pos = [], 0
     for e in index:
         p, t = e["num_people"], e["num_frames"]
         j = joints[pos : pos + p * t].reshape(p, t, 22, 3)
+        r = None if rot6d is None else rot6d[pos : pos + p * t].reshape(p, t, 21, 6)
         pos += p * t
         meta = {
             k: v
             for k, v in e.items()
             if k not in {"id", "source", "split", "captions", "num_people", "num_frames"}
         }
-        out.append(MotionClip(e["id"], e["source"], j, e["captions"], FPS, None, e["split"], meta))
+        out.append(
+            MotionClip(e["id"], e["source"], j, e["captions"], FPS, None, r, e["split"], meta)
+        )
     return out
 
 
@@ -155,9 +172,23 @@ def load_source(
     for clip in tqdm(
         loader(path, problems), desc=f"reading {name}", unit="clip", disable=not progress
     ):
+        clip.rot6d = clip_rot6d(clip)
+        clip.rotations = None  # kept as rot6d from here on
         clips.append(clip)
+    for stale in cache_dir.glob(f"{name}-*.npz"):  # older inputs or conversion versions
+        stale.unlink(missing_ok=True)
     _save_clips(cache, clips)
     return clips, False
+
+
+def clip_rot6d(clip: MotionClip) -> np.ndarray:
+    """Local 6-D rotations (P, T, 21, 6): the source's own when given, else by IK."""
+    if clip.rotations is not None:
+        rot = torch.from_numpy(np.ascontiguousarray(clip.rotations[:, :, 1:]))
+        return matrix_to_6d(rot).numpy().astype(np.float32)
+    return np.stack([joints_to_rot6d(torch.from_numpy(p)).numpy() for p in clip.joints]).astype(
+        np.float32
+    )
 
 
 def _bandai_loader(path: Path, problems: list[tuple[str, str]]) -> Iterator[MotionClip]:
@@ -227,17 +258,19 @@ class Corpus:
     def actors(self) -> dict[str, Actor]:
         """Single-person clips in their canonical frame, keyed by id (built once)."""
         if self._actors is None:
-            self._actors = {
-                c.id: Actor.from_joints(
-                    c.id, c.joints[0], c.meta.get("content", ""), c.meta.get("style", "")
-                )
-                for c in self.clips
-                if c.num_people == 1
-            }
+            self._actors = {c.id: _actor(c) for c in self.clips if c.num_people == 1}
         return self._actors
 
     def scene_joints(self, recipe: dict[str, Any]) -> np.ndarray:
         return build_scene(recipe, self.actors())
+
+    def scene_features(self, recipe: dict[str, Any]) -> np.ndarray:
+        """(P, T - 1, 262) features of a composed scene, in person 1's frame."""
+        return build_scene_features(recipe, self.actors())
+
+    def clip_features(self, clip: MotionClip) -> np.ndarray:
+        """(P, T - 1, 262) features of a real clip in its person 1's canonical frame."""
+        return clip_features(clip)
 
     def find(self, key: str) -> tuple[np.ndarray, str]:
         """(joints (P, T, 22, 3), caption) of a clip id or scene id."""
@@ -249,6 +282,22 @@ class Corpus:
                 if r["id"] == key:
                     return self.scene_joints(r), r["captions"][0]
         raise UMFError(f"no clip or scene {key!r} in {self.root}")
+
+
+def _actor(c: MotionClip) -> Actor:
+    return Actor.from_joints(
+        c.id, c.joints[0], c.meta.get("content", ""), c.meta.get("style", ""),
+        None if c.rot6d is None else c.rot6d[0],
+    )  # fmt: skip
+
+
+def clip_features(clip: MotionClip) -> np.ndarray:
+    """(P, T - 1, 262) features of a clip in its person 1's canonical frame."""
+    if clip.rot6d is None:
+        raise ValueError(f"{clip.id}: no rotations; load clips through a corpus")
+    scene, _ = canonicalize_scene(torch.from_numpy(clip.joints))
+    rot = torch.from_numpy(clip.rot6d)
+    return torch.stack([assemble_features(j, r) for j, r in zip(scene, rot, strict=True)]).numpy()
 
 
 def _split_stats(clips: list[MotionClip], scenes: list[dict]) -> dict[str, Any]:
@@ -272,20 +321,28 @@ def _split_stats(clips: list[MotionClip], scenes: list[dict]) -> dict[str, Any]:
 
 
 def fit_normalizer(
-    clips: list[MotionClip], scenes: list[np.ndarray], max_frames: int, seed: int
+    clips: list[MotionClip],
+    recipes: list[dict[str, Any]],
+    actors: dict[str, Actor],
+    max_frames: int,
+    seed: int,
 ) -> Normalizer:
-    """Mean/std of the features of train clips (canonical) and train scene persons."""
-    feats = []
-    for c in clips:
-        scene, _ = canonicalize_scene(torch.from_numpy(c.joints))
-        feats.extend(joints_to_features(p) for p in scene if p.shape[0] >= 2)
-    for s in scenes:
-        feats.extend(joints_to_features(p) for p in torch.from_numpy(s))
-    allf = torch.cat(feats)
-    if allf.shape[0] > max_frames:
-        g = torch.Generator().manual_seed(seed)
-        allf = allf[torch.randperm(allf.shape[0], generator=g)[:max_frames]]
-    return Normalizer.fit(allf)
+    """Mean/std of the features of train clips (canonical) and train scene persons.
+
+    Items are visited in a seeded random order until ``max_frames`` frames are seen, so
+    the cost stays bounded on large corpora.
+    """
+    items: list[tuple[str, Any]] = [("clip", c) for c in clips] + [("scene", r) for r in recipes]
+    order = np.random.default_rng(seed).permutation(len(items))
+    feats, seen = [], 0
+    for i in order:
+        kind, item = items[i]
+        f = clip_features(item) if kind == "clip" else build_scene_features(item, actors)
+        feats.append(torch.from_numpy(f.reshape(-1, f.shape[-1])))
+        seen += feats[-1].shape[0]
+        if seen >= max_frames:
+            break
+    return Normalizer.fit(torch.cat(feats))
 
 
 def prepare_corpus(
@@ -332,11 +389,7 @@ def prepare_corpus(
     scenes: dict[str, list[dict]] = {}
     counts = {"train": config.train_scenes, "val": config.val_scenes, "test": config.test_scenes}
     singles = {s: [c for c in clips if c.split == s and c.num_people == 1] for s in SPLITS}
-    actors = {
-        s: [Actor.from_joints(c.id, c.joints[0], c.meta.get("content", ""), c.meta.get("style", ""))
-            for c in tqdm(singles[s], desc=f"actors {s}", disable=not progress, leave=False)]
-        for s in SPLITS
-    }  # fmt: skip
+    actors = {s: [_actor(c) for c in singles[s]] for s in SPLITS}
     for i, s in enumerate(SPLITS):
         scenes[s] = compose_corpus(actors[s], counts[s], (2,), seed=config.seed + i)
         for r in scenes[s]:
@@ -350,9 +403,8 @@ def prepare_corpus(
     log("scenes: " + ", ".join(f"{k} {len(v)}" for k, v in scenes.items()))
 
     by_id = {a.id: a for s in SPLITS for a in actors[s]}
-    train_scene_joints = [build_scene(r, by_id) for r in scenes["train"]]
     normalizer = fit_normalizer(
-        [c for c in clips if c.split == "train"], train_scene_joints,
+        [c for c in clips if c.split == "train"], scenes["train"], by_id,
         config.normalizer_max_frames, config.seed,
     )  # fmt: skip
 

@@ -17,9 +17,10 @@ from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
+import torch
 
 from umf.data.relations import action_onset, check_record
-from umf.representation import canonical_transform, mirror_joints
+from umf.representation import assemble_features, canonical_transform, mirror_joints, mirror_rot6d
 from umf.skeleton import NUM_JOINTS
 
 MAX_FRAMES = 300
@@ -45,14 +46,15 @@ class Actor:
     content: str
     style: str
     onset: int  # frame where the action starts
+    rot6d: np.ndarray | None = None  # (T, 21, 6) local rotations, unchanged by placement
 
     @classmethod
-    def from_joints(cls, id: str, joints: np.ndarray, content: str, style: str) -> Actor:
-        import torch
-
+    def from_joints(
+        cls, id: str, joints: np.ndarray, content: str, style: str, rot6d: np.ndarray | None = None
+    ) -> Actor:
         tf = canonical_transform(torch.from_numpy(np.ascontiguousarray(joints)))
         canon = tf.apply(torch.from_numpy(np.ascontiguousarray(joints))).numpy()
-        return cls(id, canon.astype(np.float32), content, style, action_onset(canon))
+        return cls(id, canon.astype(np.float32), content, style, action_onset(canon), rot6d)
 
 
 # --------------------------------------------------------------------- geometry
@@ -99,9 +101,23 @@ def build_scene(recipe: dict[str, Any], actors: dict[str, Actor]) -> np.ndarray:
     return np.stack(people).astype(np.float32)
 
 
-def mirror_joints_np(joints: np.ndarray) -> np.ndarray:
-    import torch
+def build_scene_features(recipe: dict[str, Any], actors: dict[str, Actor]) -> np.ndarray:
+    """Features (P, T - 1, 262) of a scene recipe; needs actors with ``rot6d``."""
+    joints = torch.from_numpy(build_scene(recipe, actors))
+    out = []
+    for person, j in zip(recipe["people"], joints, strict=True):
+        rot = actors[person["clip"]].rot6d
+        if rot is None:
+            raise ValueError(f"actor {person['clip']} has no rotations")
+        rot = torch.from_numpy(rot)
+        if person.get("mirrored", False):
+            rot = mirror_rot6d(rot)
+        rot = time_layout(rot.numpy(), person["delay"], person["start"], recipe["num_frames"])
+        out.append(assemble_features(j, torch.from_numpy(rot)))
+    return torch.stack(out).numpy()
 
+
+def mirror_joints_np(joints: np.ndarray) -> np.ndarray:
     return mirror_joints(torch.from_numpy(np.ascontiguousarray(joints))).numpy()
 
 
