@@ -47,7 +47,7 @@ def test_groups(actors):
     for r in groups:
         j = S.build_scene(r, by_id)
         assert j.shape[0] == r["num_people"]
-        assert min_interperson_distance(j)[0] >= 0.15
+        assert min_interperson_distance(j)[0] >= 0.25
         words = {3: "three", 4: "four", 5: "five", 6: "six"}
         assert any(
             words[r["num_people"]] in c or words.get(r["num_people"] - 1, "") in c

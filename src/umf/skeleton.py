@@ -3,7 +3,7 @@
 Y is up, metres, a person in the rest pose stands at the origin facing +Z, so the
 person's left is +X. The rest pose is a T-pose (arms along +-X); rest *directions* are
 fixed here, bone *lengths* come from data (:func:`fit_offsets`) or the default body
-(:data:`DEFAULT_BONE_LENGTHS`, the median Bandai actor after retargeting).
+(:data:`DEFAULT_OFFSETS`, the Bandai actors' skeleton after retargeting).
 
 Inverse kinematics recovers local rotations from joint positions: swing-only for
 single-child bones (twist about a bone is not observable from positions) and a full
@@ -75,12 +75,33 @@ REST_DIRECTIONS: tuple[tuple[float, float, float], ...] = (
     (-1, 0, 0),   # r_wrist
 )  # fmt: skip
 
-# Median bone lengths (m) of the Bandai actors retargeted to SMPL-22; measured with
-# `umf data prepare` over all 3,076 clips. Used for the default body (exports, demo).
-DEFAULT_BONE_LENGTHS: tuple[float, ...] = (
-    0.0, 0.100, 0.100, 0.105, 0.405, 0.405, 0.090, 0.395, 0.395, 0.082, 0.140, 0.140,
-    0.082, 0.130, 0.130, 0.065, 0.053, 0.053, 0.243, 0.243, 0.223, 0.223,
-)  # fmt: skip
+# Rest offsets (m) of the default body: the Bandai actors' skeleton after retargeting to
+# SMPL-22 (`fit_offsets` gives the same values, to 1e-8 m, on all 3,076 clips: the
+# dataset is retargeted to one character), left/right symmetrised. Used by exports/demo.
+DEFAULT_OFFSETS: tuple[tuple[float, float, float], ...] = (
+    (0.0, 0.0, 0.0),  # pelvis
+    (0.0647, -0.0219, 0.0),  # l_hip
+    (-0.0647, -0.0219, 0.0),  # r_hip
+    (0.0, 0.1574, 0.0),  # spine1
+    (0.0, -0.3908, 0.0),  # l_knee
+    (0.0, -0.3908, 0.0),  # r_knee
+    (0.0, 0.0899, 0.0),  # spine2
+    (0.0, -0.4099, 0.0),  # l_ankle
+    (0.0, -0.4099, 0.0),  # r_ankle
+    (0.0, 0.0819, 0.0),  # spine3
+    (0.0, 0.0, 0.1175),  # l_foot
+    (0.0, 0.0, 0.1175),  # r_foot
+    (0.0, 0.0819, 0.0),  # neck
+    (0.0498, 0.0481, -0.0024),  # l_collar
+    (-0.0498, 0.0481, -0.0024),  # r_collar
+    (0.0, 0.0646, 0.0),  # head
+    (0.0535, 0.0, 0.0),  # l_shoulder
+    (-0.0535, 0.0, 0.0),  # r_shoulder
+    (0.2433, 0.0, 0.0),  # l_elbow
+    (-0.2433, 0.0, 0.0),  # r_elbow
+    (0.2229, 0.0, 0.0),  # l_wrist
+    (-0.2229, 0.0, 0.0),  # r_wrist
+)
 
 # Branching joints get a full frame from two of their children: (up child, left, right).
 _BRANCH_FRAMES: dict[int, tuple[int, int, int]] = {0: (3, 1, 2), 9: (12, 13, 14)}
@@ -91,18 +112,8 @@ def rest_directions(dtype=torch.float32, device=None) -> Tensor:
 
 
 def default_offsets(dtype=torch.float32, device=None) -> Tensor:
-    """Rest offsets (22, 3) of the default body: T-pose directions x median lengths.
-
-    The hips are dropped a little below the pelvis so the branch frame of the default
-    body matches a real pelvis (spine up, hips across, both below).
-    """
-    off = rest_directions(dtype, device) * torch.tensor(DEFAULT_BONE_LENGTHS, dtype=dtype)[:, None]
-    off[1] = torch.tensor([0.09, -0.045, 0.0], dtype=dtype)
-    off[2] = torch.tensor([-0.09, -0.045, 0.0], dtype=dtype)
-    off[13] = torch.tensor([0.07, 0.08, -0.01], dtype=dtype)
-    off[14] = torch.tensor([-0.07, 0.08, -0.01], dtype=dtype)
-    off[12] = torch.tensor([0.0, 0.12, 0.0], dtype=dtype)
-    return off
+    """Rest offsets (22, 3) of the default body (T-pose, facing +Z)."""
+    return torch.tensor(DEFAULT_OFFSETS, dtype=dtype, device=device)
 
 
 def bone_lengths(joints: Tensor) -> Tensor:

@@ -19,7 +19,7 @@ from umf.skeleton import FACE_JOINTS
 
 FACING_TOLERANCE_DEG = 45.0
 SAME_HEADING_TOLERANCE_DEG = 35.0
-CONTACT_DISTANCE = 0.15  # m between any two joints of different people = walking through
+CONTACT_DISTANCE = 0.25  # m between any two joints of different people: closer counts as contact
 
 
 @dataclass(frozen=True)

@@ -19,7 +19,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from umf.data.relations import action_onset, check_record
+from umf.data.relations import CONTACT_DISTANCE, action_onset, check_record
 from umf.representation import assemble_features, canonical_transform, mirror_joints, mirror_rot6d
 from umf.skeleton import NUM_JOINTS
 
@@ -174,7 +174,7 @@ def _aligned_delay(leader: Actor, follower: Actor, lag: int) -> tuple[int, int]:
 
 
 def _no_contact() -> dict:
-    return {"type": "no_contact", "min_distance": 0.15}
+    return {"type": "no_contact", "min_distance": CONTACT_DISTANCE}
 
 
 def _face_each_other(rng, actors, lag: int | None):
@@ -560,7 +560,7 @@ def _audience_captions(rng, actors, n):
 def _gather(rng, actors):
     caller, *walkers = actors
     n_w = len(walkers)
-    spread = np.radians(rng.uniform(60, 110))
+    spread = np.radians(rng.uniform(80, 140))
     angles = (np.arange(n_w) - (n_w - 1) / 2) * (spread / max(n_w - 1, 1))
     dist = float(rng.uniform(3.5, 4.5))
     lag = int(rng.integers(10, 25))
@@ -569,7 +569,7 @@ def _gather(rng, actors):
     for a, ang in zip(walkers, angles, strict=True):
         pos = (dist * np.sin(ang), dist * np.cos(ang))
         delay, start = _aligned_delay(caller, a, lag)
-        frames.append(_walk_up_to(a, dist, stop=1.4) + delay)
+        frames.append(_walk_up_to(a, dist, stop=1.6) + delay)
         people.append(_person(a, heading_to(pos, (0.0, 0.0)), pos, delay, start))
     n = min(min(frames), MAX_FRAMES)
     if n < MIN_FRAMES + lag:
@@ -660,12 +660,12 @@ def _pick_actors(
     chosen: list[Actor] = []
     roles = relation.roles(n)
     if relation.name == "audience":  # the group answers in kind: call -> respond, bow -> bow
-        lead = [a for c in roles[0] for a in pools.get(c, [])]
+        answers = {"call": "respond", "bow": "bow"}
+        lead = [a for c in roles[0] for a in pools.get(c, []) if pools.get(answers[c])]
         if not lead:
             return None
         leader = lead[int(rng.integers(len(lead)))]
-        answer = ("respond",) if leader.content == "call" else ("bow",)
-        roles = [(leader.content,)] + [answer] * (n - 1)
+        roles = [(leader.content,)] + [(answers[leader.content],)] * (n - 1)
     if relation.name in ("walk_side_by_side", "run_side_by_side", "group_line"):
         # one speed class for everybody, so nobody overtakes
         first = [a for c in roles[0] for a in pools.get(c, [])]
