@@ -127,3 +127,53 @@ def test_bad_inputs():
         C.prepare_corpus("/tmp/x", {"bandai": "/nonexistent"}, progress=False)
     with pytest.raises(UMFError, match="not a umf corpus"):
         C.Corpus.load("/nonexistent")
+
+
+def test_prepare_with_humanml3d_and_interhuman(tmp_path, bandai_clips):
+    """All three adapters feed one corpus; dataset splits are kept, bad items reported."""
+    from test_interhuman import make_root, write_scene
+    from umf.data.humanml3d import encode_joints
+
+    ih = make_root(tmp_path / "InterHuman")
+    for item in ("1", "2"):
+        write_scene(ih, item, 60)
+        (ih / "annots" / f"{item}.txt").write_text("two people walk past each other.\n")
+    (ih / "train.txt").write_text("1\n")
+    (ih / "test.txt").write_text("2\n")
+
+    hm = tmp_path / "HumanML3D"
+    for sub in ("new_joint_vecs", "texts"):
+        (hm / sub).mkdir(parents=True)
+    walk = next(c for c in bandai_clips if c.id == "dataset-1_walk_normal_001").joints[0]
+    from umf.data.bandai import resample
+
+    at20 = resample(walk[None], 30.0, 20.0)[0]  # HumanML3D runs at 20 fps
+    vec = encode_joints(torch.from_numpy(at20).double()).float().numpy()
+    np.save(hm / "new_joint_vecs" / "000001.npy", vec)
+    (hm / "texts" / "000001.txt").write_text("a person walks forward.#a/DET#0.0#0.0\n")
+    (hm / "new_joint_vecs" / "000002.npy").write_bytes(b"garbage")
+    (hm / "texts" / "000002.txt").write_text("a person jumps.#a/DET#0.0#0.0\n")
+    (hm / "train.txt").write_text("000001\n000002\n")
+
+    cfg = C.PrepareConfig(train_scenes=4, val_scenes=0, test_scenes=0, test_groups=0)
+    m = C.prepare_corpus(
+        tmp_path / "out",
+        {"bandai": BANDAI_FIXTURE, "humanml3d": hm, "interhuman": ih},
+        cfg,
+        progress=False,
+        log=lambda s: None,
+    )
+    assert [s["name"] for s in m["sources"]] == ["bandai", "humanml3d", "interhuman"]
+    assert [s["clips"] for s in m["sources"]] == [11, 1, 2]
+    assert any("000002" in s["file"] for s in m["skipped"])
+    corpus = C.Corpus.load(tmp_path / "out")
+    by_id = {c.id: c for c in corpus.clips}
+    two = [c for c in corpus.clips if c.source == "interhuman"]
+    assert {c.split for c in two} == {"train", "test"} and all(c.num_people == 2 for c in two)
+    feats = corpus.clip_features(two[0])
+    assert feats.shape == (2, two[0].num_frames - 1, 262)
+    h = by_id["000001"]
+    # 20 -> 30 fps: about the original number of frames of the walk again
+    assert abs(h.num_frames - walk.shape[0]) <= 3 and h.fps == 30.0
+    travel = np.linalg.norm(h.joints[0, -1, 0, [0, 2]] - h.joints[0, 0, 0, [0, 2]])
+    assert travel > 5.0

@@ -18,6 +18,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import warnings
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -29,6 +30,7 @@ from tqdm import tqdm
 
 from umf import __version__
 from umf.data.clip import FPS, MotionClip
+from umf.data.humanml3d import SkippedItemWarning
 from umf.data.scenes import Actor, build_scene, build_scene_features, compose_corpus
 from umf.errors import UMFError
 from umf.io import atomic_path, write_json_atomic
@@ -169,12 +171,16 @@ def load_source(
         except (OSError, ValueError, KeyError, json.JSONDecodeError):
             cache.unlink(missing_ok=True)  # a broken cache is rebuilt, never trusted
     clips: list[MotionClip] = []
-    for clip in tqdm(
-        loader(path, problems), desc=f"reading {name}", unit="clip", disable=not progress
-    ):
-        clip.rot6d = clip_rot6d(clip)
-        clip.rotations = None  # kept as rot6d from here on
-        clips.append(clip)
+    found: list[tuple[Any, str]] = []
+    with warnings.catch_warnings():  # skipped items are reported once, by the caller
+        warnings.simplefilter("ignore", SkippedItemWarning)
+        for clip in tqdm(
+            loader(path, found), desc=f"reading {name}", unit="clip", disable=not progress
+        ):
+            clip.rot6d = clip_rot6d(clip)
+            clip.rotations = None  # kept as rot6d from here on
+            clips.append(clip)
+    problems.extend((str(origin), str(reason)) for origin, reason in found)
     for stale in cache_dir.glob(f"{name}-*.npz"):  # older inputs or conversion versions
         stale.unlink(missing_ok=True)
     _save_clips(cache, clips)
