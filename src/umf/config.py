@@ -1,0 +1,264 @@
+"""One config object per stage (dataclasses, saved as YAML/JSON), and the two families.
+
+``paper`` is the authors' size (for GPUs); ``small`` trains on a 2-core CPU in about an
+hour on the Bandai corpus. Every ablation of the paper is a field here, so a variant is
+one YAML override away (see ``umf train --set``).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import yaml
+
+from umf.errors import UMFError
+
+
+@dataclass
+class VAEConfig:
+    """Motion VAE (paper Sec. 4.1): multi-token latent through the latent adapter."""
+
+    feature_dim: int = 262
+    d_model: int = 512
+    num_layers: int = 9  # long-skip transformer: L//2 in, 1 middle, L//2 out
+    num_heads: int = 4
+    ff_dim: int = 1024
+    dropout: float = 0.1
+    num_tokens: int = 16  # p; 1 = the single-token ablation
+    latent_dim: int = 64  # r (the paper text also mentions 16 x 32)
+    latent_adapter: bool = True  # False: latent width = d_model, no projection (ablation)
+    max_frames: int = 300
+    # loss weights (paper Eq. 5); the authors' release switched the geometric terms off
+    w_recon: float = 1.0
+    w_kl: float = 1e-4
+    w_pos: float = 0.5
+    w_vel: float = 0.5
+    w_contact: float = 0.1
+    w_bone: float = 0.1
+    w_interaction: float = 0.5
+
+
+@dataclass
+class DenoiserConfig:
+    """Skip transformer over [time, text, (dataset), latent tokens]."""
+
+    d_model: int = 512
+    num_layers: int = 9
+    num_heads: int = 4
+    ff_dim: int = 1024
+    dropout: float = 0.1
+    text_width: int = 768  # trainable 2-layer text head on the frozen encoder
+    text_heads: int = 8
+    text_ff_dim: int = 2048
+    text_layers: int = 2
+    branch_layers: int = 2  # per-dataset output branches (P-Flow only)
+
+
+@dataclass
+class PFlowConfig:
+    """Pyramidal flow for the first person (paper Sec. 4.2.1)."""
+
+    denoiser: DenoiserConfig = field(default_factory=DenoiserConfig)
+    layout: str = "1d"  # "1d" token pyramid or "2d" token grid
+    num_stages: int = 2  # 1 = no pyramid (ablation)
+    g: float | None = None  # block-noise correlation; None = 1/(b-1)
+    steps: tuple[int, ...] = (45, 5)  # coarse -> fine
+    solver: str = "euler"
+    guidance: float = 3.0
+    p_uncond: float = 0.1
+    single_person_weight: float = 0.1  # loss scale of the single-person corpus
+    num_datasets: int = 2  # learned dataset token: 0 single-person, 1 multi-person
+
+
+@dataclass
+class SFlowConfig:
+    """Semi-noise reaction flow (paper Sec. 4.2.2)."""
+
+    denoiser: DenoiserConfig = field(default_factory=lambda: DenoiserConfig(num_layers=13))
+    context_layers: int = 2
+    context_heads: int = 4
+    context_ff_dim: int = 1024
+    context_adapter: bool = True  # False: C = mean of previous latents (ablation)
+    context_positional: bool = False
+    steps: int = 10
+    solver: str = "euler"
+    guidance: float = 3.0
+    p_uncond: float = 0.1
+    lambda_recon: float = 1.0  # 0 = no reconstruction loss (ablation)
+    reaction_only: bool = False  # noise-free reaction path (ablation)
+    context_noise: float = 0.0  # perturb real context latents to look generated
+    shared_backbone: bool = False  # share the P-Flow transformer (ablation)
+
+
+@dataclass
+class TextConfig:
+    encoder: str = "minilm"  # or "clip"
+    path: str | None = None  # local weights directory for CLIP
+    max_length: int = 128
+
+
+@dataclass
+class TrainConfig:
+    """Optimisation of one stage (AdamW + cosine, paper Sec. 5.1)."""
+
+    lr: float = 1e-4
+    weight_decay: float = 0.0
+    betas: tuple[float, float] = (0.9, 0.999)
+    warmup_steps: int = 500
+    max_steps: int = 100_000
+    batch_size: int = 64
+    grad_clip: float = 1.0
+    ema_decay: float | None = None  # e.g. 0.999
+    min_frames: int = 30
+    max_frames: int = 150  # training crop length (frames at 30 fps)
+    val_every: int = 1000
+    ckpt_every: int = 1000
+    log_every: int = 50
+    num_workers: int = 0
+    seed: int = 0
+
+
+@dataclass
+class UMFConfig:
+    """Everything needed to rebuild a model; saved as config.json in checkpoints."""
+
+    family: str = "paper"
+    fps: float = 30.0
+    text: TextConfig = field(default_factory=TextConfig)
+    vae: VAEConfig = field(default_factory=VAEConfig)
+    pflow: PFlowConfig = field(default_factory=PFlowConfig)
+    sflow: SFlowConfig = field(default_factory=SFlowConfig)
+    train_vae: TrainConfig = field(default_factory=lambda: TrainConfig(batch_size=128))
+    train_pflow: TrainConfig = field(default_factory=TrainConfig)
+    train_sflow: TrainConfig = field(default_factory=TrainConfig)
+
+    def to_dict(self) -> dict[str, Any]:
+        return dataclasses.asdict(self)
+
+    @classmethod
+    def from_dict(cls, d: dict[str, Any]) -> UMFConfig:
+        return _from_dict(cls, d)
+
+    def save_yaml(self, path: str | Path) -> None:
+        from umf.io import write_text_atomic
+
+        write_text_atomic(path, yaml.safe_dump(_plain(self.to_dict()), sort_keys=False))
+
+    @classmethod
+    def load_yaml(cls, path: str | Path) -> UMFConfig:
+        try:
+            data = yaml.safe_load(Path(path).read_text()) or {}
+        except (OSError, yaml.YAMLError) as exc:
+            raise UMFError(f"{path}: cannot read config ({exc})") from exc
+        family = data.pop("family", "paper") if isinstance(data, dict) else "paper"
+        base = family_config(family).to_dict()
+        return cls.from_dict(_merge(base, data))
+
+
+def _plain(x: Any) -> Any:
+    if isinstance(x, dict):
+        return {k: _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    return x
+
+
+def _merge(base: dict, over: dict) -> dict:
+    out = dict(base)
+    for k, v in over.items():
+        out[k] = _merge(out[k], v) if isinstance(v, dict) and isinstance(out.get(k), dict) else v
+    return out
+
+
+def _from_dict(cls, d: dict[str, Any]):
+    if not isinstance(d, dict):
+        raise UMFError(f"expected a mapping for {cls.__name__}, got {type(d).__name__}")
+    fields = {f.name: f for f in dataclasses.fields(cls)}
+    unknown = set(d) - set(fields)
+    if unknown:
+        raise UMFError(f"unknown {cls.__name__} option(s): {', '.join(sorted(unknown))}")
+    kwargs = {}
+    hints = {f.name: f.type for f in dataclasses.fields(cls)}
+    for name, value in d.items():
+        default = getattr(cls(), name) if name in fields else None
+        if dataclasses.is_dataclass(default):
+            kwargs[name] = _from_dict(type(default), value)
+        elif isinstance(default, tuple) and isinstance(value, list):
+            kwargs[name] = tuple(value)
+        elif "tuple" in str(hints[name]) and isinstance(value, list):
+            kwargs[name] = tuple(value)
+        else:
+            kwargs[name] = value
+    return cls(**kwargs)
+
+
+def set_option(cfg: UMFConfig, assignment: str) -> UMFConfig:
+    """Apply ``a.b.c=value`` (value parsed as YAML) and return a new config."""
+    if "=" not in assignment:
+        raise UMFError(f"--set expects key=value, got {assignment!r}")
+    key, raw = assignment.split("=", 1)
+    value = yaml.safe_load(raw)
+    tree: Any = value
+    for part in reversed(key.strip().split(".")):
+        tree = {part: tree}
+    return UMFConfig.from_dict(_merge(cfg.to_dict(), tree))
+
+
+def small_config() -> UMFConfig:
+    """Trains on this 2-core CPU in about an hour on the Bandai corpus (all stages)."""
+    den = DenoiserConfig(
+        d_model=256, num_layers=6, num_heads=4, ff_dim=512, dropout=0.1,
+        text_width=256, text_heads=4, text_ff_dim=512, text_layers=2, branch_layers=1,
+    )  # fmt: skip
+    return UMFConfig(
+        family="small",
+        vae=VAEConfig(
+            d_model=256,
+            num_layers=5,
+            num_heads=4,
+            ff_dim=512,
+            num_tokens=16,
+            latent_dim=32,
+            max_frames=300,
+        ),  # fmt: skip
+        pflow=PFlowConfig(denoiser=den),
+        sflow=SFlowConfig(denoiser=dataclasses.replace(den), context_ff_dim=256),
+        train_vae=TrainConfig(
+            lr=2e-4,
+            batch_size=32,
+            max_steps=6000,
+            warmup_steps=300,
+            max_frames=120,
+            val_every=500,
+            ckpt_every=500,
+        ),  # fmt: skip
+        train_pflow=TrainConfig(
+            lr=2e-4,
+            batch_size=64,
+            max_steps=8000,
+            warmup_steps=300,
+            max_frames=120,
+            val_every=1000,
+            ckpt_every=1000,
+        ),  # fmt: skip
+        train_sflow=TrainConfig(
+            lr=2e-4,
+            batch_size=64,
+            max_steps=8000,
+            warmup_steps=300,
+            max_frames=120,
+            val_every=1000,
+            ckpt_every=1000,
+        ),  # fmt: skip
+    )
+
+
+def family_config(name: str) -> UMFConfig:
+    if name == "paper":
+        return UMFConfig()
+    if name == "small":
+        return small_config()
+    raise UMFError(f"unknown config family {name!r} (choose paper or small)")
