@@ -210,9 +210,17 @@ def set_option(cfg: UMFConfig, assignment: str) -> UMFConfig:
 def small_config() -> UMFConfig:
     """Trains on this 2-core CPU in about an hour on the Bandai corpus (all stages)."""
     den = DenoiserConfig(
-        d_model=256, num_layers=6, num_heads=4, ff_dim=512, dropout=0.1,
-        text_width=256, text_heads=4, text_ff_dim=512, text_layers=2, branch_layers=1,
-    )  # fmt: skip
+        d_model=256,
+        num_layers=6,
+        num_heads=4,
+        ff_dim=512,
+        dropout=0.1,
+        text_width=256,
+        text_heads=4,
+        text_ff_dim=512,
+        text_layers=2,
+        branch_layers=1,
+    )
     return UMFConfig(
         family="small",
         vae=VAEConfig(
@@ -223,7 +231,7 @@ def small_config() -> UMFConfig:
             num_tokens=16,
             latent_dim=32,
             max_frames=300,
-        ),  # fmt: skip
+        ),
         pflow=PFlowConfig(denoiser=den),
         sflow=SFlowConfig(denoiser=dataclasses.replace(den), context_ff_dim=256),
         train_vae=TrainConfig(
@@ -234,7 +242,7 @@ def small_config() -> UMFConfig:
             max_frames=120,
             val_every=500,
             ckpt_every=500,
-        ),  # fmt: skip
+        ),
         train_pflow=TrainConfig(
             lr=2e-4,
             batch_size=64,
@@ -243,7 +251,7 @@ def small_config() -> UMFConfig:
             max_frames=120,
             val_every=1000,
             ckpt_every=1000,
-        ),  # fmt: skip
+        ),
         train_sflow=TrainConfig(
             lr=2e-4,
             batch_size=64,
@@ -252,7 +260,7 @@ def small_config() -> UMFConfig:
             max_frames=120,
             val_every=1000,
             ckpt_every=1000,
-        ),  # fmt: skip
+        ),
     )
 
 

@@ -1,0 +1,280 @@
+"""Algorithm 1 of the paper: text + N -> N synchronized motions.
+
+1. P-Flow generates person 1's latent from the text (pyramidal flow matching).
+2. For i = 2..N the context adapter pools the latents of everybody generated so far and
+   S-Flow integrates from that context to person i's latent (one ODE pass).
+3. The VAE decodes every latent into 262-d features, hence joints.
+
+:class:`UMFPipeline` holds the frozen text encoder, the VAE, P-Flow, S-Flow and the
+normaliser, and returns :class:`Scene` objects. ``UMFPipeline.from_pretrained(dir)``
+loads a model directory written by ``umf train``.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import torch
+
+from umf import __version__
+from umf.config import UMFConfig
+from umf.errors import UMFError
+from umf.representation import Normalizer, features_to_joints
+
+MAX_PEOPLE = 16
+MODEL_FORMAT = "umf-model"
+MODEL_FORMAT_VERSION = 1
+
+
+@dataclass
+class Scene:
+    """N people's generated (or given) motion, in person 1's frame (Y up, metres)."""
+
+    joints: np.ndarray  # (N, T, 22, 3)
+    features: np.ndarray  # (N, T, 262), de-normalised
+    text: str
+    fps: float
+    seed: int | None = None
+    model: str = ""
+    meta: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def num_people(self) -> int:
+        return int(self.joints.shape[0])
+
+    @property
+    def num_frames(self) -> int:
+        return int(self.joints.shape[1])
+
+    def save_npz(self, path: str | Path) -> Path:
+        from umf.io import save_npz_atomic
+
+        save_npz_atomic(
+            path,
+            joints=self.joints.astype(np.float32),
+            features=self.features.astype(np.float32),
+            text=np.array(self.text),
+            fps=np.array(self.fps, dtype=np.float32),
+            seed=np.array(-1 if self.seed is None else self.seed),
+            model_version=np.array(self.model),
+            umf_version=np.array(__version__),
+        )
+        return Path(path)
+
+    def render(self, path: str | Path, **kwargs: Any) -> Path:
+        from umf.render import render_animation
+
+        return render_animation(self.joints, path, caption=self.text, fps=self.fps, **kwargs)
+
+
+def _text_features(encoder, texts: Sequence[str]):
+    return encoder.encode(list(texts))
+
+
+class UMFPipeline:
+    """The whole model for sampling: text encoder, VAE, P-Flow, S-Flow, normaliser."""
+
+    def __init__(
+        self,
+        config: UMFConfig,
+        text_encoder,
+        vae,
+        pflow,
+        sflow,
+        normalizer: Normalizer,
+        name: str = "",
+    ) -> None:
+        self.config = config
+        self.text_encoder = text_encoder
+        self.vae = vae.eval()
+        self.pflow = pflow.eval()
+        self.sflow = sflow.eval()
+        self.normalizer = normalizer
+        self.name = name
+        self.device = torch.device("cpu")
+
+    # ------------------------------------------------------------------ loading
+    @classmethod
+    def build(cls, config: UMFConfig, normalizer: Normalizer | None = None, text_encoder=None):
+        """Fresh (untrained) modules for ``config``; used by training and tests."""
+        from umf.models.pflow import PFlow
+        from umf.models.sflow import SFlow
+        from umf.models.vae import MotionVAE
+        from umf.text import build_text_encoder
+
+        enc = text_encoder or build_text_encoder(
+            config.text.encoder, config.text.path, max_length=config.text.max_length
+        )
+        vae = MotionVAE(config.vae)
+        p, r = vae.latent_shape
+        pflow = PFlow(config.pflow, p, r, enc.dim)
+        backbone = pflow.backbone if config.sflow.shared_backbone else None
+        sflow = SFlow(config.sflow, p, r, enc.dim, backbone=backbone)
+        if normalizer is None:
+            normalizer = Normalizer(torch.zeros(262), torch.ones(262))
+        return cls(config, enc, vae, pflow, sflow, normalizer)
+
+    @classmethod
+    def from_pretrained(cls, path: str | Path | None = None, text_encoder=None) -> UMFPipeline:
+        """Load a model directory (default: the bundled model shipped with umf)."""
+        from safetensors.torch import load_file
+
+        path = Path(path) if path is not None else default_model_dir()
+        if not path.is_dir():
+            raise UMFError(f"model not found: {path}")
+        fmt_path = path / "format.json"
+        try:
+            fmt = json.loads(fmt_path.read_text())
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UMFError(f"{path}: not a umf model directory (no readable format.json)") from exc
+        if fmt.get("format") not in (MODEL_FORMAT, "umf-checkpoint"):
+            raise UMFError(f"{fmt_path}: unknown format {fmt.get('format')!r}")
+        try:
+            config = UMFConfig.from_dict(json.loads((path / "config.json").read_text()))
+        except (OSError, json.JSONDecodeError) as exc:
+            raise UMFError(f"{path}/config.json: unreadable ({exc})") from exc
+        normalizer = Normalizer.load(path / "normalizer.safetensors")
+        pipe = cls.build(config, normalizer, text_encoder)
+        for name in ("vae", "pflow", "sflow"):
+            module = getattr(pipe, name)
+            file = path / f"{name}.safetensors"
+            if not file.exists():
+                raise UMFError(f"{path}: missing {file.name}")
+            try:
+                state = {k: v.float() for k, v in load_file(str(file)).items()}
+            except Exception as exc:  # safetensors raises several types on corrupt files
+                raise UMFError(f"{file}: corrupt weights ({exc})") from exc
+            missing, unexpected = module.load_state_dict(state, strict=False)
+            # the shared backbone (ablation) is stored once, with P-Flow
+            missing = [m for m in missing if not (name == "sflow" and m.startswith("backbone."))]
+            if missing or unexpected:
+                raise UMFError(
+                    f"{file}: weights do not match the config "
+                    f"(missing {missing[:3]}, unexpected {unexpected[:3]})"
+                )
+        pipe.name = fmt.get("name", path.name)
+        return pipe
+
+    def to(self, device: str | torch.device) -> UMFPipeline:
+        self.device = torch.device(device)
+        for m in (self.vae, self.pflow, self.sflow):
+            m.to(self.device)
+        if hasattr(self.text_encoder, "to"):
+            self.text_encoder.to(self.device)
+        return self
+
+    # ------------------------------------------------------------------ sampling
+    def _frames(self, seconds: float) -> int:
+        t = int(round(seconds * self.config.fps))
+        if not 15 <= t <= self.config.vae.max_frames:
+            lo, hi = 15 / self.config.fps, self.config.vae.max_frames / self.config.fps
+            raise UMFError(f"--seconds must be between {lo:.1f} and {hi:.1f}, got {seconds}")
+        return t
+
+    @torch.no_grad()
+    def __call__(
+        self,
+        prompts: str | Sequence[str],
+        num_people: int = 2,
+        seconds: float = 4.0,
+        seed: int | None = 0,
+        guidance: float | None = None,
+        pflow_steps: Sequence[int] | None = None,
+        sflow_steps: int | None = None,
+        actor: np.ndarray | None = None,
+    ) -> list[Scene]:
+        """Generate one scene per prompt (batched). ``actor`` (T, 22, 3) fixes person 1."""
+        prompts = [prompts] if isinstance(prompts, str) else list(prompts)
+        if not prompts or any(not p.strip() for p in prompts):
+            raise UMFError("the prompt is empty")
+        if not 1 <= num_people <= MAX_PEOPLE:
+            raise UMFError(f"--people must be between 1 and {MAX_PEOPLE}, got {num_people}")
+        gen = torch.Generator(device="cpu")
+        gen.manual_seed(int(seed) if seed is not None else torch.seed())
+        b = len(prompts)
+        text = _text_features(self.text_encoder, prompts).to(self.device)
+        uncond = _text_features(self.text_encoder, [""] * b).to(self.device)
+        nfe = 0
+        if actor is not None:
+            t = actor.shape[0] - 1  # T joint frames are T - 1 feature frames
+            latents = [self._encode_actor(actor, b)]
+        else:
+            t = self._frames(seconds)
+            dataset = torch.full((b,), 1 if num_people > 1 else 0, dtype=torch.long)
+            z1, n = self.pflow.sample(
+                text,
+                uncond,
+                dataset=dataset.to(self.device),
+                steps=tuple(pflow_steps) if pflow_steps else self.config.pflow.steps,
+                guidance=self.config.pflow.guidance if guidance is None else guidance,
+                generator=gen,
+            )
+            latents, nfe = [z1], nfe + n
+        for _ in range(1, num_people):
+            prev = torch.stack(latents, dim=1)
+            mask = torch.ones(prev.shape[:2], dtype=torch.bool, device=self.device)
+            w, n = self.sflow.sample(
+                prev,
+                mask,
+                text,
+                uncond,
+                steps=sflow_steps or self.config.sflow.steps,
+                guidance=self.config.sflow.guidance if guidance is None else guidance,
+                generator=gen,
+            )
+            latents.append(w)
+            nfe += n
+        z = torch.stack(latents, dim=1)  # (B, N, p, r)
+        feats = self.decode(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
+        joints = features_to_joints(feats)
+        if actor is not None:  # person 1 is the user's motion, exactly
+            joints[:, 0] = torch.from_numpy(actor[: joints.shape[2]]).to(joints)
+        meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people}
+        return [
+            Scene(
+                joints[i].cpu().numpy(),
+                feats[i].cpu().numpy(),
+                prompts[i],
+                self.config.fps,
+                seed,
+                self.name,
+                dict(meta),
+            )
+            for i in range(b)
+        ]
+
+    def decode(self, z: torch.Tensor, num_frames: int) -> torch.Tensor:
+        """Latents (B, p, r) -> de-normalised features (B, T, 262)."""
+        mask = torch.ones(z.shape[0], num_frames, dtype=torch.bool, device=z.device)
+        return self.normalizer.denormalize(self.vae.decode(z, mask))
+
+    def _encode_actor(self, actor: np.ndarray, batch: int) -> torch.Tensor:
+        from umf.representation import joints_to_features
+
+        if actor.ndim != 3 or actor.shape[1:] != (22, 3):
+            raise UMFError(f"the actor motion must be (T, 22, 3) joints, got {actor.shape}")
+        if not 16 <= actor.shape[0] <= self.config.vae.max_frames + 1:
+            raise UMFError(
+                f"the actor motion must have 16..{self.config.vae.max_frames + 1} frames, "
+                f"got {actor.shape[0]}"
+            )
+        f = joints_to_features(torch.from_numpy(np.ascontiguousarray(actor, dtype=np.float32)))
+        x = self.normalizer.normalize(f)[None].to(self.device)
+        mask = torch.ones(1, x.shape[1], dtype=torch.bool, device=self.device)
+        mu, _ = self.vae.encode(x, mask)
+        return mu.expand(batch, -1, -1)
+
+
+def default_model_dir() -> Path:
+    """Where the bundled model lives inside the installed package."""
+    return Path(__file__).parent / "assets" / "model"
+
+
+def frames_for(seconds: float, fps: float = 30.0) -> int:
+    return int(math.floor(seconds * fps + 0.5))
