@@ -28,8 +28,6 @@ from umf.errors import UMFError
 from umf.representation import Normalizer, features_to_joints
 
 MAX_PEOPLE = 16
-MODEL_FORMAT = "umf-model"
-MODEL_FORMAT_VERSION = 1
 
 
 @dataclass
@@ -114,7 +112,7 @@ class UMFPipeline:
         vae = MotionVAE(config.vae)
         p, r = vae.latent_shape
         pflow = PFlow(config.pflow, p, r, enc.dim)
-        backbone = pflow.backbone if config.sflow.shared_backbone else None
+        backbone = pflow.net if config.sflow.shared_backbone else None
         sflow = SFlow(config.sflow, p, r, enc.dim, backbone=backbone)
         if normalizer is None:
             normalizer = Normalizer(torch.zeros(262), torch.ones(262))
@@ -122,43 +120,32 @@ class UMFPipeline:
 
     @classmethod
     def from_pretrained(cls, path: str | Path | None = None, text_encoder=None) -> UMFPipeline:
-        """Load a model directory (default: the bundled model shipped with umf)."""
-        from safetensors.torch import load_file
+        """Load a model directory (default: the bundled model shipped with umf).
+
+        A model directory is a umf checkpoint with the modules ``vae``, ``pflow`` and
+        ``sflow`` (``umf train export`` writes one); every problem is a one-line UMFError.
+        """
+        from umf.train.checkpoint import load_checkpoint, read_info
 
         path = Path(path) if path is not None else default_model_dir()
         if not path.is_dir():
             raise UMFError(f"model not found: {path}")
-        fmt_path = path / "format.json"
-        try:
-            fmt = json.loads(fmt_path.read_text())
-        except (OSError, json.JSONDecodeError) as exc:
-            raise UMFError(f"{path}: not a umf model directory (no readable format.json)") from exc
-        if fmt.get("format") not in (MODEL_FORMAT, "umf-checkpoint"):
-            raise UMFError(f"{fmt_path}: unknown format {fmt.get('format')!r}")
+        info = read_info(path)
+        missing = {"vae", "pflow", "sflow"} - set(info.get("modules", []))
+        if missing:
+            raise UMFError(f"{path}: not a complete umf model (no {', '.join(sorted(missing))})")
         try:
             config = UMFConfig.from_dict(json.loads((path / "config.json").read_text()))
         except (OSError, json.JSONDecodeError) as exc:
             raise UMFError(f"{path}/config.json: unreadable ({exc})") from exc
-        normalizer = Normalizer.load(path / "normalizer.safetensors")
-        pipe = cls.build(config, normalizer, text_encoder)
-        for name in ("vae", "pflow", "sflow"):
-            module = getattr(pipe, name)
-            file = path / f"{name}.safetensors"
-            if not file.exists():
-                raise UMFError(f"{path}: missing {file.name}")
-            try:
-                state = {k: v.float() for k, v in load_file(str(file)).items()}
-            except Exception as exc:  # safetensors raises several types on corrupt files
-                raise UMFError(f"{file}: corrupt weights ({exc})") from exc
-            missing, unexpected = module.load_state_dict(state, strict=False)
-            # the shared backbone (ablation) is stored once, with P-Flow
-            missing = [m for m in missing if not (name == "sflow" and m.startswith("backbone."))]
-            if missing or unexpected:
-                raise UMFError(
-                    f"{file}: weights do not match the config "
-                    f"(missing {missing[:3]}, unexpected {unexpected[:3]})"
-                )
-        pipe.name = fmt.get("name", path.name)
+        pipe = cls.build(config, None, text_encoder)
+        ck = load_checkpoint(path, {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow})
+        if ck.normalizer is None:
+            raise UMFError(f"{path}: missing normalizer.safetensors")
+        pipe.normalizer = ck.normalizer
+        pipe.name = path.name
+        for m in (pipe.vae, pipe.pflow, pipe.sflow):
+            m.float().eval()
         return pipe
 
     def to(self, device: str | torch.device) -> UMFPipeline:
@@ -171,7 +158,7 @@ class UMFPipeline:
 
     # ------------------------------------------------------------------ sampling
     def _frames(self, seconds: float) -> int:
-        t = int(round(seconds * self.config.fps))
+        t = round(seconds * self.config.fps)
         if not 15 <= t <= self.config.vae.max_frames:
             lo, hi = 15 / self.config.fps, self.config.vae.max_frames / self.config.fps
             raise UMFError(f"--seconds must be between {lo:.1f} and {hi:.1f}, got {seconds}")
@@ -277,4 +264,4 @@ def default_model_dir() -> Path:
 
 
 def frames_for(seconds: float, fps: float = 30.0) -> int:
-    return int(math.floor(seconds * fps + 0.5))
+    return math.floor(seconds * fps + 0.5)

@@ -8,6 +8,7 @@ import typer
 
 from umf import __version__
 from umf.cli.data import app as data_app
+from umf.cli.train import app as train_app
 from umf.errors import UMFError
 
 app = typer.Typer(
@@ -18,6 +19,7 @@ app = typer.Typer(
     add_completion=False,
 )
 app.add_typer(data_app, name="data")
+app.add_typer(train_app, name="train")
 
 
 def _version(value: bool) -> None:

@@ -1,0 +1,100 @@
+"""`umf train ...`: the three stages, all of them in order, and the model export."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+app = typer.Typer(help="Train UMF: vae, pflow, sflow, or all three; export a model.",
+                  no_args_is_help=True)  # fmt: skip
+
+CORPUS = typer.Option(..., "--corpus", help="A corpus from `umf data prepare`.")
+RUN = typer.Option(..., "--out", help="Run directory (one sub-directory per stage).")
+FAMILY = typer.Option(None, help="Config family: small (CPU, default) or paper (GPU).")
+CONFIG = typer.Option(None, "--config", help="YAML config (family + overrides).")
+SET = typer.Option([], "--set", help="Override one option, e.g. --set pflow.num_stages=1.")
+STEPS = typer.Option(None, "--max-steps", help="Override the stage's max_steps.")
+ACCEL = typer.Option("cpu", help="cpu, gpu or auto (Lightning Fabric).")
+DEVICES = typer.Option("1", help="Devices per node (number or 'auto').")
+NODES = typer.Option(1, "--num-nodes", help="Number of nodes.")
+STRATEGY = typer.Option("auto", help="auto or ddp.")
+PRECISION = typer.Option("32-true", help="32-true, bf16-mixed, 16-mixed.")
+RESUME = typer.Option(False, "--resume", help="Continue a killed run from its last checkpoint.")
+PROGRESS = typer.Option(True, help="Show progress bars.")
+TB = typer.Option(False, "--tensorboard", help="Also log to TensorBoard (if installed).")
+
+
+def _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard):
+    from umf.train.run import Launch
+
+    dev: int | str = int(devices) if str(devices).isdigit() else devices
+    return Launch(accelerator, dev, num_nodes, strategy, precision, progress, tensorboard)
+
+
+def _run(stages, corpus, out, family, config, set_, max_steps, launch, resume) -> None:
+    from umf.train.run import resolve_config, train_stage
+
+    cfg = resolve_config(out, family, config, set_)
+    for stage in stages:
+        summary = train_stage(stage, corpus, out, cfg, launch, resume=resume,
+                              max_steps=max_steps, log=typer.echo)  # fmt: skip
+        typer.echo(
+            f"{stage}: {summary.get('steps')} steps in {summary.get('seconds', 0):.0f} s "
+            f"({summary.get('seconds_per_step', 0):.3f} s/step); best val "
+            f"{summary.get('best_val')}; checkpoints in {out / stage}"
+        )
+
+
+def _stage_command(stage: str):
+    def command(
+        corpus: Path = CORPUS, out: Path = RUN, family: str | None = FAMILY,
+        config: Path | None = CONFIG, set_: list[str] = SET, max_steps: int | None = STEPS,
+        accelerator: str = ACCEL, devices: str = DEVICES, num_nodes: int = NODES,
+        strategy: str = STRATEGY, precision: str = PRECISION, resume: bool = RESUME,
+        progress: bool = PROGRESS, tensorboard: bool = TB,
+    ) -> None:  # fmt: skip
+        launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress,
+                         tensorboard)  # fmt: skip
+        _run([stage], corpus, out, family, config, set_, max_steps, launch, resume)
+
+    command.__doc__ = {
+        "vae": "Train the motion VAE (single-person crops and scenes).",
+        "pflow": "Train P-Flow on the run's frozen VAE latents (needs `train vae`).",
+        "sflow": "Train S-Flow on scenes, VAE frozen (needs `train vae`).",
+    }[stage]
+    return command
+
+
+for _stage in ("vae", "pflow", "sflow"):
+    app.command(_stage)(_stage_command(_stage))
+
+
+@app.command("all")
+def all_stages(
+    corpus: Path = CORPUS, out: Path = RUN, family: str | None = FAMILY,
+    config: Path | None = CONFIG, set_: list[str] = SET, max_steps: int | None = STEPS,
+    accelerator: str = ACCEL, devices: str = DEVICES, num_nodes: int = NODES,
+    strategy: str = STRATEGY, precision: str = PRECISION, resume: bool = RESUME,
+    progress: bool = PROGRESS, tensorboard: bool = TB,
+    fp16: bool = typer.Option(True, help="Export weights in fp16."),
+) -> None:  # fmt: skip
+    """Train vae, pflow and sflow in order, then export RUN/model."""
+    from umf.train.run import export_model
+
+    launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard)
+    _run(["vae", "pflow", "sflow"], corpus, out, family, config, set_, max_steps, launch, resume)
+    path = export_model(out, out / "model", fp16=fp16)
+    typer.echo(f"model written to {path}")
+
+
+@app.command()
+def export(
+    run: Path = typer.Option(..., "--run", help="A run directory with all three stages."),
+    out: Path = typer.Option(..., "--out", help="Model directory to write."),
+    fp16: bool = typer.Option(True, help="Store weights in fp16."),
+) -> None:
+    """Collect a run's best checkpoints into one model directory."""
+    from umf.train.run import export_model
+
+    typer.echo(f"model written to {export_model(run, out, fp16=fp16)}")

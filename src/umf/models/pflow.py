@@ -1,0 +1,208 @@
+"""P-Flow: the first person's latent from text (paper Sec. 4.2.1, SPEC 6).
+
+A thin module: the pyramid maths (training sample, jump, sampler) lives in
+``umf.flows.pyramid``; this binds it to a ``FlowTransformer`` and adds classifier-free
+guidance and the single-/multi-person corpus weighting.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from umf.config import PFlowConfig
+from umf.flows import (
+    Method,
+    PyramidConfig,
+    classifier_free_guidance,
+    default_steps,
+    flow_matching_loss,
+    initial_noise,
+    pyramid_training_sample,
+    sample_pyramid,
+)
+from umf.models.denoiser import (
+    FROM_CONFIG,
+    FlowTransformer,
+    GuidanceArg,
+    drop_text,
+    evaluating,
+    repeat_text,
+    resolve_guidance,
+)
+from umf.text import Pooling, TextFeatures
+
+
+def resolve_steps(steps: int | Sequence[int], num_stages: int) -> tuple[int, ...]:
+    """Per-stage step counts, coarse -> fine.
+
+    K counts are used as given; a single count is split over the stages like the paper's
+    45/5; K = 1 (the no-pyramid ablation) keeps the total of a per-stage budget, so
+    ``--set pflow.num_stages=1`` compares at the same number of steps.
+    """
+    seq = (steps,) if isinstance(steps, int) else tuple(int(s) for s in steps)
+    if len(seq) == num_stages:
+        return seq
+    if num_stages == 1:
+        return (sum(seq),)
+    if len(seq) == 1:
+        return default_steps(num_stages, seq[0])
+    raise ValueError(f"need {num_stages} step counts (coarse -> fine), got {seq}")
+
+
+def encode_uncond(net: FlowTransformer, uncond_text: TextFeatures, batch: int) -> Tensor:
+    """Text token of the empty prompt for ``batch`` rows (computed on one row if given one)."""
+    u = net.encode_text(uncond_text)
+    if u.shape[0] == batch:
+        return u
+    if u.shape[0] != 1:
+        raise ValueError(f"uncond_text has {u.shape[0]} rows; expected 1 or {batch}")
+    return u.expand(batch, -1)
+
+
+class PFlow(nn.Module):
+    """Pyramidal flow matching over (B, p, r) latents conditioned on text and dataset.
+
+    ``forward`` is ``loss`` so that a DistributedDataParallel wrapper sees the training
+    computation. Dataset 0 is the single-person corpus, 1 the multi-person one.
+    """
+
+    def __init__(
+        self,
+        cfg: PFlowConfig,
+        num_tokens: int,
+        latent_dim: int,
+        text_dim: int,
+        *,
+        text_pool: Pooling = "mean",
+    ):
+        super().__init__()
+        self.cfg = cfg
+        self.num_tokens, self.latent_dim = num_tokens, latent_dim
+        self.pyramid = PyramidConfig(
+            layout=cfg.layout, num_stages=cfg.num_stages, num_tokens=num_tokens, g=cfg.g
+        )
+        self.net = FlowTransformer(
+            cfg.denoiser,
+            latent_dim,
+            latent_dim,
+            text_dim,
+            num_tokens,
+            num_stages=cfg.num_stages,
+            num_datasets=cfg.num_datasets,
+            text_pool=text_pool,
+            layout=cfg.layout,
+        )
+
+    def forward(self, *args: Any, **kwargs: Any) -> dict[str, Tensor]:
+        return self.loss(*args, **kwargs)
+
+    def loss(
+        self,
+        z1: Tensor,
+        text: TextFeatures,
+        uncond_text: TextFeatures,
+        dataset: Tensor | None = None,
+        generator: torch.Generator | None = None,
+    ) -> dict[str, Tensor]:
+        """Masked pyramid flow-matching loss of a batch; each sample draws its own stage.
+
+        ``total`` (to backpropagate) = mean over samples of weight * MSE, weight
+        ``single_person_weight`` for dataset 0, else 1; ``mse`` (unweighted) and
+        ``stage{k}`` (stages present in the batch) are detached, for logging.
+        """
+        b = z1.shape[0]
+        if dataset is None and self.net.num_datasets > 0:
+            raise ValueError("P-Flow with dataset tokens needs dataset=(B,) long")
+        sample = pyramid_training_sample(z1, self.pyramid, generator=generator)
+        drop = torch.rand(b, generator=generator, device=z1.device) < self.cfg.p_uncond
+        pred = self.net(
+            sample.x,
+            sample.t,
+            drop_text(text, uncond_text, drop),
+            stage=sample.stage,
+            dataset=dataset,
+            token_mask=sample.mask,
+        )
+        single = torch.zeros(b, dtype=torch.bool, device=z1.device)
+        if dataset is not None:
+            single = dataset.to(z1.device) == 0
+        total = pred.new_zeros(())
+        for sel, weight in ((single, self.cfg.single_person_weight), (~single, 1.0)):
+            idx = sel.nonzero().squeeze(1)
+            if idx.numel():
+                group = flow_matching_loss(pred[idx], sample.target[idx], sample.mask[idx])
+                total = total + weight * idx.numel() / b * group
+        out = {
+            "total": total,
+            "mse": flow_matching_loss(pred, sample.target, sample.mask).detach(),
+        }
+        for w in self.pyramid.windows:
+            idx = (sample.stage == w.stage).nonzero().squeeze(1)
+            if idx.numel():
+                out[f"stage{w.stage}"] = flow_matching_loss(
+                    pred[idx], sample.target[idx], sample.mask[idx]
+                ).detach()
+        return out
+
+    @torch.no_grad()
+    def sample(
+        self,
+        text: TextFeatures,
+        uncond_text: TextFeatures | None = None,
+        *,
+        num_samples: int = 1,
+        dataset: int | Tensor = 1,
+        steps: int | Sequence[int] | None = None,
+        solver: Method | None = None,
+        guidance: GuidanceArg = FROM_CONFIG,
+        generator: torch.Generator | None = None,
+    ) -> tuple[Tensor, int]:
+        """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) and the NFE.
+
+        Defaults come from the config; ``guidance`` None or 1.0 disables CFG (then
+        ``uncond_text`` is not needed). The NFE counts guided-field evaluations (one
+        double-batch forward each), ``sum(steps) * evals per solver step``. Runs in eval
+        mode and restores the previous mode.
+        """
+        text = repeat_text(text, num_samples)
+        param = next(self.parameters())
+        b = text.tokens.shape[0]
+        scale = resolve_guidance(guidance, self.cfg.guidance)
+        with evaluating(self):
+            cond: dict[str, Any] = {"text": self.net.encode_text(text)}
+            if self.net.num_datasets > 0:
+                ds = torch.as_tensor(dataset, dtype=torch.long, device=param.device)
+                ds = ds.expand(b) if ds.dim() == 0 else ds.repeat_interleave(num_samples)
+                cond["dataset"] = ds
+            field: Callable[..., Tensor] = self.net
+            if scale is not None:
+                if uncond_text is None:
+                    raise ValueError("classifier-free guidance needs uncond_text")
+                if uncond_text.tokens.shape[0] not in (1, b):
+                    uncond_text = repeat_text(uncond_text, num_samples)
+                uncond = {**cond, "text": encode_uncond(self.net, uncond_text, b)}
+                field = classifier_free_guidance(self.net, scale, cond, uncond)
+                cond = {}
+            k = self.pyramid.num_stages
+            noise = initial_noise(
+                self.pyramid,
+                b,
+                self.latent_dim,
+                generator=generator,
+                device=param.device,
+                dtype=param.dtype,
+            )
+            z, nfe = sample_pyramid(
+                field,
+                noise,
+                self.pyramid,
+                steps=resolve_steps(self.cfg.steps if steps is None else steps, k),
+                method=solver or self.cfg.solver,  # type: ignore[arg-type]
+                generator=generator,
+                cond=cond,
+            )
+        return z, nfe

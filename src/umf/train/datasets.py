@@ -1,0 +1,487 @@
+"""Torch datasets over a prepared corpus: random crops, placement, mirroring, padding.
+
+Frames of reference (decided here, used by every stage):
+
+* Every crop is re-canonicalised at its first frame: person 1's pelvis goes over the
+  origin and person 1 faces +Z (:func:`canonicalize_features`). Heights are kept as the
+  corpus floored them (lowest joint of the whole clip on y = 0): re-flooring each crop
+  would lift a jump's take-off off the floor. P-Flow and S-Flow train on this frame.
+* The VAE additionally sees ``random_placement``: a random yaw in [-pi, pi) and an XZ
+  offset within ``placement_radius`` metres (:func:`place_features`), because it must
+  encode person 2..N too, who start anywhere facing anywhere.
+* Mirroring (p = 0.5) flips the motion left/right and swaps the side words of the caption
+  (:func:`mirror_caption`); a canonical crop stays canonical when mirrored.
+
+Every random choice of an item is drawn from a generator keyed by (seed, epoch, index),
+so an item does not depend on worker processes or on what was loaded before it: a
+resumed run sees exactly the data an uninterrupted run would have seen.
+"""
+
+from __future__ import annotations
+
+import math
+import re
+from collections.abc import Iterator, Sequence
+from typing import Any
+
+import numpy as np
+import torch
+from torch.utils.data import DataLoader, Dataset, Sampler
+
+from umf.data.clip import MotionClip
+from umf.data.corpus import Corpus
+from umf.errors import UMFError
+from umf.representation import (
+    FEATURE_DIM,
+    POS,
+    VEL,
+    Normalizer,
+    RigidTransform,
+    assemble_features,
+    canonical_transform,
+    features_to_joints,
+    heading_angle,
+    mirror_features,
+)
+from umf.rotations import yaw_matrix
+
+Tensor = torch.Tensor
+
+PLACEMENT_RADIUS = 3.0  # metres: people of a scene stand within a few metres of each other
+SINGLE_PERSON, MULTI_PERSON = 0, 1  # the dataset token of P-Flow
+
+_SIDE_WORDS = {
+    "left": "right",
+    "right": "left",
+    "leftward": "rightward",
+    "rightward": "leftward",
+    "leftwards": "rightwards",
+    "rightwards": "leftwards",
+    "clockwise": "counterclockwise",
+    "counterclockwise": "clockwise",
+    "counter-clockwise": "clockwise",
+    "anticlockwise": "clockwise",
+    "anti-clockwise": "clockwise",
+}
+# longest alternatives first, so "counter-clockwise" is never read as "clockwise"
+_SIDE_RE = re.compile(
+    r"\b(" + "|".join(sorted(map(re.escape, _SIDE_WORDS), key=len, reverse=True)) + r")\b",
+    re.IGNORECASE,
+)
+
+
+# --------------------------------------------------------------------- pure functions
+def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) -> Tensor:
+    """Turn people about +Y by ``yaw`` (rad) around the origin, then move them by (dx, dz).
+
+    Only positions and velocities change: local rotations exclude the root and contacts
+    depend on heights and speeds, both invariant to a rigid motion on the floor. Same
+    convention as :func:`umf.data.scenes.yaw_rotate` (+Z turns to (sin, 0, cos)).
+    Works on (..., T, 262) and matches features recomputed from the moved joints.
+    """
+    lead = features.shape[:-1]
+    rot = yaw_matrix(torch.as_tensor(yaw, dtype=features.dtype)).to(features.device)
+    shift = torch.tensor([dx, 0.0, dz], dtype=features.dtype, device=features.device)
+    pos = features[..., POS].reshape(*lead, 22, 3) @ rot.T + shift
+    vel = features[..., VEL].reshape(*lead, 22, 3) @ rot.T
+    return torch.cat(
+        [pos.reshape(*lead, 66), vel.reshape(*lead, 66), features[..., VEL.stop :]], dim=-1
+    )
+
+
+def canonicalize_features(features: Tensor) -> Tensor:
+    """Express people (P, T, 262) (or one person (T, 262)) in person 1's frame at frame 0.
+
+    Person 1's first-frame pelvis goes over the origin (XZ only; heights are kept) and
+    person 1's first-frame facing direction turns to +Z; everyone moves with them, so
+    relative placements are unchanged.
+    """
+    first = features if features.ndim == 2 else features[0]
+    joints0 = features_to_joints(first[0])
+    yaw = -heading_angle(joints0)
+    rot = yaw_matrix(yaw)
+    origin = torch.stack([joints0[0, 0], joints0.new_zeros(()), joints0[0, 2]])
+    shift = -(rot @ origin)
+    return place_features(features, yaw, float(shift[0]), float(shift[2]))
+
+
+def mirror_caption(text: str) -> str:
+    """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
+
+    def swap(m: re.Match) -> str:
+        word = m.group(0)
+        out = _SIDE_WORDS[word.lower()]
+        if word.isupper() and len(word) > 1:
+            return out.upper()
+        return out[0].upper() + out[1:] if word[0].isupper() else out
+
+    return _SIDE_RE.sub(swap, text)
+
+
+def crop_window(
+    rng: np.random.Generator, total: int, min_frames: int, max_frames: int
+) -> tuple[int, int]:
+    """(start, length): length uniform in [min, max] capped by ``total``, start uniform."""
+    hi = min(max_frames, total)
+    lo = min(min_frames, hi)
+    length = int(rng.integers(lo, hi + 1))
+    return int(rng.integers(0, total - length + 1)), length
+
+
+def item_rng(seed: int, epoch: int, index: int) -> np.random.Generator:
+    """The generator of one item: a function of (seed, epoch, index) only."""
+    return np.random.default_rng([seed % 2**63, epoch, index])
+
+
+def _check_frames(min_frames: int, max_frames: int) -> None:
+    if not 1 <= min_frames <= max_frames:
+        raise UMFError(f"need 1 <= min_frames <= max_frames, got {min_frames}, {max_frames}")
+
+
+def _clip_crop(
+    clip: MotionClip, tf: RigidTransform, people: Sequence[int], start: int, length: int
+):
+    """Features (len(people), length, 262) of a crop, in the clip's floored frame."""
+    if clip.rot6d is None:
+        raise UMFError(f"{clip.id}: no rotations; load clips through a prepared corpus")
+    stop = start + length + 1  # one more joint frame gives the last velocity
+    out = []
+    for p in people:
+        joints = tf.apply(torch.from_numpy(np.ascontiguousarray(clip.joints[p, start:stop])))
+        out.append(assemble_features(joints, torch.from_numpy(clip.rot6d[p, start:stop])))
+    return torch.stack(out)
+
+
+def _finish(
+    features: Tensor,
+    normalizer: Normalizer | None,
+    caption: str,
+    rng: np.random.Generator,
+    mirror: bool,
+) -> tuple[Tensor, str, bool]:
+    """Mirror with p = 0.5 (drawn last, so it never shifts the other draws) and normalise."""
+    mirrored = bool(mirror and rng.random() < 0.5)
+    if mirrored:
+        features = mirror_features(features)
+        caption = mirror_caption(caption)
+    if normalizer is not None:
+        features = normalizer.normalize(features)
+    return features.float().contiguous(), caption, mirrored
+
+
+class _EpochDataset(Dataset):
+    """Map-style dataset whose random draws depend on (seed, epoch, index)."""
+
+    def __init__(self, seed: int) -> None:
+        self.seed = int(seed)
+        self.epoch = 0
+
+    def set_epoch(self, epoch: int) -> None:
+        """New random crops each epoch; called by the trainer before each pass."""
+        self.epoch = int(epoch)
+
+    def _rng(self, index: int) -> np.random.Generator:
+        return item_rng(self.seed, self.epoch, index)
+
+
+# --------------------------------------------------------------------- single person
+class SingleMotionDataset(_EpochDataset):
+    """One person's random crop per item, canonical at the crop start (+ optional placement).
+
+    Items are the people of the split's clips: each single-person clip, and each person of
+    a real multi-person clip (dataset token 1, with the clip's caption). ``normalizer=None``
+    serves raw features (for inspection).
+    """
+
+    def __init__(
+        self,
+        corpus: Corpus,
+        split: str,
+        normalizer: Normalizer | None,
+        min_frames: int = 30,
+        max_frames: int = 150,
+        random_placement: bool = False,
+        mirror: bool = True,
+        seed: int = 0,
+        placement_radius: float = PLACEMENT_RADIUS,
+    ) -> None:
+        super().__init__(seed)
+        _check_frames(min_frames, max_frames)
+        self.normalizer = normalizer
+        self.min_frames, self.max_frames = min_frames, max_frames
+        self.random_placement, self.mirror = random_placement, mirror
+        self.placement_radius = placement_radius
+        self.items: list[tuple[MotionClip, int, RigidTransform]] = []
+        for clip in corpus.split_clips(split):
+            if clip.num_frames < 2:
+                continue
+            tf = canonical_transform(torch.from_numpy(np.ascontiguousarray(clip.joints[0])))
+            self.items.extend((clip, p, tf) for p in range(clip.num_people))
+        if not self.items:
+            raise UMFError(f"{corpus.root}: no clips in split {split!r}")
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        clip, person, tf = self.items[index]
+        rng = self._rng(index)
+        start, length = crop_window(rng, clip.num_frames - 1, self.min_frames, self.max_frames)
+        caption = clip.captions[int(rng.integers(len(clip.captions)))] if clip.captions else ""
+        f = canonicalize_features(_clip_crop(clip, tf, [person], start, length))[0]
+        if self.random_placement:
+            yaw = float(rng.uniform(-math.pi, math.pi))
+            dx, dz = rng.uniform(-self.placement_radius, self.placement_radius, size=2)
+            f = place_features(f, yaw, float(dx), float(dz))
+        f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror)
+        key = clip.id if clip.num_people == 1 else f"{clip.id}/p{person}"
+        return {
+            "features": f,
+            "length": length,
+            "caption": caption,
+            "dataset": SINGLE_PERSON if clip.num_people == 1 else MULTI_PERSON,
+            "id": key,
+            "start": start,
+            "mirrored": mirrored,
+        }
+
+    @staticmethod
+    def collate(items: list[dict[str, Any]]) -> dict[str, Any]:
+        return collate_single(items)
+
+
+# --------------------------------------------------------------------- scenes
+def crop_recipe(recipe: dict[str, Any], actors: dict, start: int, length: int) -> dict[str, Any]:
+    """The recipe of frames [start, start + length] of a composed scene (joint frames).
+
+    Equivalent to building the whole scene and cropping it, at the cost of the crop only.
+    """
+    people = []
+    for p in recipe["people"]:
+        delay, first = p["delay"], p["start"]
+        if start < delay:
+            delay, first = delay - start, first
+        else:
+            n = actors[p["clip"]].joints.shape[0]
+            delay, first = 0, min(first + start - delay, n - 1)
+        people.append({**p, "delay": delay, "start": first})
+    return {**recipe, "num_frames": length, "people": people}
+
+
+class SceneDataset(_EpochDataset):
+    """One multi-person scene per item, cropped in time for everybody, in person 1's frame.
+
+    Serves the split's composed scenes and, with ``real_clips``, its real multi-person
+    clips (InterHuman). Scenes with more than ``max_people`` people are left out rather
+    than truncated: their captions count everybody.
+    """
+
+    def __init__(
+        self,
+        corpus: Corpus,
+        split: str,
+        normalizer: Normalizer | None,
+        min_frames: int = 30,
+        max_frames: int = 150,
+        mirror: bool = True,
+        seed: int = 0,
+        max_people: int | None = None,
+        real_clips: bool = True,
+    ) -> None:
+        super().__init__(seed)
+        _check_frames(min_frames, max_frames)
+        self.corpus, self.normalizer = corpus, normalizer
+        self.min_frames, self.max_frames, self.mirror = min_frames, max_frames, mirror
+        fits = lambda n: n >= 2 and (max_people is None or n <= max_people)  # noqa: E731
+        self.items: list[tuple[str, Any, RigidTransform | None]] = [
+            ("scene", r, None)
+            for r in corpus.scenes.get(split, [])
+            if fits(r["num_people"]) and r["num_frames"] >= 2
+        ]
+        if real_clips:
+            for clip in corpus.split_clips(split):
+                if fits(clip.num_people) and clip.num_frames >= 2:
+                    tf = canonical_transform(torch.from_numpy(np.ascontiguousarray(clip.joints[0])))
+                    self.items.append(("clip", clip, tf))
+        if not self.items:
+            raise UMFError(f"{corpus.root}: no multi-person scenes in split {split!r}")
+        corpus.actors()  # built once here, so worker processes inherit it
+
+    def __len__(self) -> int:
+        return len(self.items)
+
+    def _crop(self, kind: str, item: Any, tf, start: int, length: int) -> Tensor:
+        if kind == "clip":
+            return _clip_crop(item, tf, range(item.num_people), start, length)
+        recipe = crop_recipe(item, self.corpus.actors(), start, length + 1)
+        return torch.from_numpy(self.corpus.scene_features(recipe))
+
+    def __getitem__(self, index: int) -> dict[str, Any]:
+        kind, item, tf = self.items[index]
+        rng = self._rng(index)
+        total = (item.num_frames if kind == "clip" else item["num_frames"]) - 1
+        start, length = crop_window(rng, total, self.min_frames, self.max_frames)
+        captions = item.captions if kind == "clip" else item["captions"]
+        caption = captions[int(rng.integers(len(captions)))] if captions else ""
+        f = canonicalize_features(self._crop(kind, item, tf, start, length))
+        f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror)
+        return {
+            "features": f,
+            "length": length,
+            "num_people": int(f.shape[0]),
+            "caption": caption,
+            "dataset": MULTI_PERSON,
+            "id": item.id if kind == "clip" else item["id"],
+            "start": start,
+            "mirrored": mirrored,
+        }
+
+    @staticmethod
+    def collate(items: list[dict[str, Any]]) -> dict[str, Any]:
+        return collate_scenes(items)
+
+
+# --------------------------------------------------------------------- batching
+def _meta(items: list[dict[str, Any]]) -> dict[str, Any]:
+    return {
+        "lengths": torch.tensor([it["length"] for it in items], dtype=torch.long),
+        "captions": [it["caption"] for it in items],
+        "dataset": torch.tensor([it["dataset"] for it in items], dtype=torch.long),
+        "ids": [it["id"] for it in items],
+    }
+
+
+def collate_single(items: list[dict[str, Any]]) -> dict[str, Any]:
+    """Pad to the batch's longest crop: features (B, T, 262), mask (B, T) True on frames."""
+    t = max(it["features"].shape[0] for it in items)
+    feats = torch.zeros(len(items), t, FEATURE_DIM)
+    mask = torch.zeros(len(items), t, dtype=torch.bool)
+    for i, it in enumerate(items):
+        n = it["features"].shape[0]
+        feats[i, :n] = it["features"]
+        mask[i, :n] = True
+    return {"features": feats, "mask": mask, **_meta(items)}
+
+
+def collate_scenes(items: list[dict[str, Any]]) -> dict[str, Any]:
+    """Pad time and people: features (B, P, T, 262), mask (B, T), people_mask (B, P)."""
+    t = max(it["features"].shape[1] for it in items)
+    p = max(it["features"].shape[0] for it in items)
+    feats = torch.zeros(len(items), p, t, FEATURE_DIM)
+    mask = torch.zeros(len(items), t, dtype=torch.bool)
+    people = torch.zeros(len(items), p, dtype=torch.bool)
+    for i, it in enumerate(items):
+        n_p, n_t = it["features"].shape[:2]
+        feats[i, :n_p, :n_t] = it["features"]
+        mask[i, :n_t] = True
+        people[i, :n_p] = True
+    num_people = torch.tensor([it["num_people"] for it in items], dtype=torch.long)
+    return {
+        "features": feats,
+        "mask": mask,
+        "people_mask": people,
+        "num_people": num_people,
+        **_meta(items),
+    }
+
+
+class ShardedSampler(Sampler[int]):
+    """Seeded, epoch-keyed shuffling, sharded by rank, resumable mid-epoch.
+
+    Like ``DistributedSampler`` (padding so every rank gets the same count), plus
+    ``start``: the number of this rank's indices of the current epoch to skip, so a
+    resumed run continues an epoch without loading the skipped items.
+    """
+
+    def __init__(
+        self,
+        num_items: int,
+        *,
+        shuffle: bool,
+        seed: int = 0,
+        rank: int = 0,
+        world_size: int = 1,
+    ) -> None:
+        if num_items <= 0:
+            raise UMFError("cannot sample from an empty dataset")
+        self.num_items, self.shuffle, self.seed = num_items, shuffle, seed
+        self.rank, self.world_size = rank, world_size
+        self.epoch, self.start = 0, 0
+
+    def set_epoch(self, epoch: int) -> None:
+        self.epoch = int(epoch)
+
+    def indices(self) -> np.ndarray:
+        """This rank's indices of the current epoch (before skipping ``start``)."""
+        n = self.num_items
+        order = (
+            np.random.default_rng([self.seed, self.epoch]).permutation(n)
+            if self.shuffle
+            else np.arange(n)
+        )
+        total = math.ceil(n / self.world_size) * self.world_size
+        return np.resize(order, total)[self.rank :: self.world_size]
+
+    def __iter__(self) -> Iterator[int]:
+        return iter(self.indices()[self.start :].tolist())
+
+    def __len__(self) -> int:
+        return max(math.ceil(self.num_items / self.world_size) - self.start, 0)
+
+
+def make_loader(
+    dataset: Dataset,
+    batch_size: int,
+    *,
+    shuffle: bool,
+    num_workers: int = 0,
+    drop_last: bool | None = None,
+    seed: int = 0,
+) -> DataLoader:
+    """A DataLoader with the dataset's own collate function (train: shuffle, drop_last).
+
+    ``batch_size`` is per device; the trainer re-shards the loader across ranks.
+    """
+    return DataLoader(
+        dataset,
+        batch_size=batch_size,
+        shuffle=shuffle,
+        num_workers=num_workers,
+        collate_fn=getattr(dataset, "collate", None),
+        drop_last=shuffle if drop_last is None else drop_last,
+        generator=torch.Generator().manual_seed(seed),
+    )
+
+
+class MixedBatches:
+    """Alternate whole batches from several loaders (SPEC 6: single- and multi-person).
+
+    The trainer takes batch ``step % len(loaders)`` from an endless, resumable stream of
+    each loader. Iterating directly yields one batch of each in turn, restarting a loader
+    that runs out, until every loader has been through at least once.
+    """
+
+    def __init__(self, *loaders: DataLoader) -> None:
+        if not loaders:
+            raise UMFError("MixedBatches needs at least one loader")
+        self.loaders = list(loaders)
+
+    def __len__(self) -> int:
+        return len(self.loaders) * max(len(lo) for lo in self.loaders)
+
+    def __iter__(self) -> Iterator[Any]:
+        its = [iter(lo) for lo in self.loaders]
+        done = [False] * len(its)
+        while True:
+            for i, lo in enumerate(self.loaders):
+                try:
+                    batch = next(its[i])
+                except StopIteration:
+                    done[i] = True
+                    if all(done):
+                        return
+                    its[i] = iter(lo)
+                    batch = next(its[i], None)
+                    if batch is None:
+                        raise UMFError(f"loader {i} of MixedBatches yields no batch") from None
+                yield batch

@@ -1,0 +1,195 @@
+"""Run the stages end to end: config resolution, data loaders, the three stages, export.
+
+A run directory holds ``config.yaml`` and one sub-directory per stage (``vae/``,
+``pflow/``, ``sflow/``, each with ``last/``, ``best/``, ``metrics.csv`` and
+``loss_curves.png``); ``export`` collects the best weights into one model directory that
+``UMFPipeline.from_pretrained`` loads.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import torch
+
+from umf.config import TrainConfig, UMFConfig, family_config, set_option
+from umf.data.corpus import Corpus
+from umf.errors import UMFError
+from umf.train.checkpoint import find_checkpoint, load_checkpoint, read_weights, save_checkpoint
+from umf.train.datasets import MixedBatches, SceneDataset, SingleMotionDataset, make_loader
+
+STAGES = ("vae", "pflow", "sflow")
+
+
+@dataclass
+class Launch:
+    """Where and how to run (Lightning Fabric): the same command from a CPU to a cluster."""
+
+    accelerator: str = "cpu"
+    devices: int | str = 1
+    num_nodes: int = 1
+    strategy: str = "auto"
+    precision: str = "32-true"
+    progress: bool = True
+    tensorboard: bool = False
+
+
+def resolve_config(
+    run_dir: Path, family: str | None, config_file: Path | None, overrides: Sequence[str]
+) -> UMFConfig:
+    """Config of a run: the saved one when resuming, else family + file + --set overrides."""
+    saved = run_dir / "config.yaml"
+    if saved.exists() and family is None and config_file is None:
+        cfg = UMFConfig.load_yaml(saved)
+    elif config_file is not None:
+        cfg = UMFConfig.load_yaml(config_file)
+    else:
+        cfg = family_config(family or "small")
+    for o in overrides:
+        cfg = set_option(cfg, o)
+    return cfg
+
+
+def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig:
+    t: TrainConfig = getattr(cfg, f"train_{stage}")
+    if max_steps is not None:
+        t = TrainConfig(**{**vars(t), "max_steps": max_steps})
+    return t
+
+
+def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig):
+    norm = corpus.normalizer
+    kw = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
+
+    def single(split: str, shuffle: bool, placement: bool):
+        ds = SingleMotionDataset(corpus, split, norm, random_placement=placement,
+                                 mirror=shuffle, seed=t.seed, **kw)  # fmt: skip
+        return make_loader(ds, t.batch_size, shuffle=shuffle, num_workers=t.num_workers,
+                           seed=t.seed)  # fmt: skip
+
+    def scenes(split: str, shuffle: bool):
+        ds = SceneDataset(corpus, split, norm, mirror=shuffle, seed=t.seed, **kw)
+        return make_loader(ds, t.batch_size, shuffle=shuffle, num_workers=t.num_workers,
+                           seed=t.seed)  # fmt: skip
+
+    if stage == "vae":  # people may start anywhere, facing anywhere (SPEC 2)
+        return (MixedBatches(single("train", True, True), scenes("train", True)),
+                MixedBatches(single("val", False, False), scenes("val", False)))  # fmt: skip
+    if stage == "pflow":
+        return (MixedBatches(single("train", True, False), scenes("train", True)),
+                MixedBatches(single("val", False, False), scenes("val", False)))  # fmt: skip
+    return scenes("train", True), scenes("val", False)
+
+
+def _load_frozen(path: Path, name: str, module: torch.nn.Module) -> None:
+    ck = find_checkpoint(path)
+    if ck is None:
+        raise UMFError(f"{path}: no {name} checkpoint; train the {name} stage first")
+    load_checkpoint(ck, {name: module})
+
+
+def best_or_last(stage_dir: Path) -> Path:
+    for sub in ("best", "last"):
+        found = find_checkpoint(stage_dir / sub)
+        if found is not None:
+            return found
+    raise UMFError(f"{stage_dir}: no checkpoint; train this stage first")
+
+
+def corpus_captions(corpus: Corpus) -> list[str]:
+    """Every caption training can ask for: clips, scenes, their mirrored forms, and ''."""
+    from umf.train.datasets import mirror_caption
+
+    texts = {""}
+    for c in corpus.clips:
+        texts.update(c.captions)
+    for recipes in corpus.scenes.values():
+        for r in recipes:
+            texts.update(r["captions"])
+    texts.update([mirror_caption(t) for t in texts])
+    return sorted(texts)
+
+
+def text_cache(cfg: UMFConfig, corpus: Corpus, progress: bool = True):
+    """Frozen text features of the whole corpus, encoded once in large batches.
+
+    Encoding captions batch by batch during training would cost more than the flow
+    steps themselves on a CPU; the cache also persists on disk next to the corpus.
+    """
+    from tqdm import tqdm
+
+    from umf.text import TextFeatureCache, build_text_encoder
+
+    enc = build_text_encoder(cfg.text.encoder, cfg.text.path, max_length=cfg.text.max_length)
+    cache = TextFeatureCache(enc, cache_dir=corpus.root / "text-cache")
+    texts = corpus_captions(corpus)
+    chunk = 256
+    for i in tqdm(range(0, len(texts), chunk), desc="text features", disable=not progress):
+        cache.encode(texts[i : i + chunk])
+    return cache
+
+
+def train_stage(
+    stage: str,
+    corpus_dir: Path,
+    run_dir: Path,
+    cfg: UMFConfig,
+    launch: Launch,
+    *,
+    resume: bool = False,
+    max_steps: int | None = None,
+    log: Callable[[str], None] = print,
+) -> dict[str, Any]:
+    """Train one stage of a run; the flow stages load the run's trained VAE (frozen)."""
+    from umf.models.pflow import PFlow
+    from umf.models.vae import MotionVAE
+    from umf.train.loop import train
+    from umf.train.stages import PFlowStage, SFlowStage, VAEStage
+
+    if stage not in STAGES:
+        raise UMFError(f"unknown stage {stage!r} (choose {', '.join(STAGES)})")
+    corpus = Corpus.load(corpus_dir)
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cfg.save_yaml(run_dir / "config.yaml")
+    t = _train_cfg(cfg, stage, max_steps)
+    torch.manual_seed(t.seed)
+    normalizer = corpus.normalizer
+    if stage == "vae":
+        st: Any = VAEStage(cfg, normalizer)
+    else:
+        vae = MotionVAE(cfg.vae)
+        _load_frozen(best_or_last(run_dir / "vae"), "vae", vae)
+        cache = text_cache(cfg, corpus, launch.progress)
+        if stage == "pflow":
+            st = PFlowStage(cfg, vae, cache, seed=t.seed)
+        else:
+            backbone = None
+            if cfg.sflow.shared_backbone:  # ablation: reuse the trained P-Flow transformer
+                p, r = vae.latent_shape
+                pflow = PFlow(cfg.pflow, p, r, cache.encoder.dim)
+                _load_frozen(best_or_last(run_dir / "pflow"), "pflow", pflow)
+                backbone = pflow.net
+            st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed)
+    train_loader, val_loader = _loaders(stage, corpus, cfg, t)
+    log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
+    return train(
+        st, train_loader, val_loader, t, run_dir / stage,
+        config=cfg.to_dict(), normalizer=normalizer,
+        accelerator=launch.accelerator, devices=launch.devices, num_nodes=launch.num_nodes,
+        strategy=launch.strategy, precision=launch.precision, resume=resume,
+        progress=launch.progress, tensorboard=launch.tensorboard, log=log,
+    )  # fmt: skip
+
+
+def export_model(run_dir: Path, out: Path, fp16: bool = True) -> Path:
+    """One model directory from a run's best checkpoints (what from_pretrained loads)."""
+    cfg = UMFConfig.load_yaml(run_dir / "config.yaml")
+    weights = {s: read_weights(best_or_last(run_dir / s), s) for s in STAGES}
+    ck = load_checkpoint(best_or_last(run_dir / "vae"))
+    return save_checkpoint(
+        out, weights, config=cfg.to_dict(), normalizer=ck.normalizer,
+        dtype=torch.float16 if fp16 else None,
+    )  # fmt: skip

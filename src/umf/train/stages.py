@@ -1,0 +1,186 @@
+"""The three training stages of UMF as :class:`umf.train.loop.Stage` objects.
+
+- ``VAEStage``: the motion VAE on single-person crops (randomly placed) and on scenes
+  (every person, with the interaction term).
+- ``PFlowStage``: P-Flow on the frozen VAE's latents of person 1, alternating batches of
+  the single-person corpus (dataset 0) and of the scenes (dataset 1).
+- ``SFlowStage``: S-Flow on scenes: person i's latent as a reaction to the latents of the
+  *real* people before it (SPEC 7, defect a), VAE and P-Flow frozen.
+"""
+
+from __future__ import annotations
+
+from typing import Any
+
+import torch
+from torch import Tensor, nn
+
+from umf.config import UMFConfig
+from umf.models.pflow import PFlow
+from umf.models.sflow import SFlow
+from umf.models.vae import MotionVAE, vae_losses
+from umf.representation import POS, Normalizer
+from umf.text import TextFeatureCache, TextFeatures
+
+
+def _is_scene(batch: dict[str, Any]) -> bool:
+    return batch["features"].dim() == 4
+
+
+def flatten_scenes(batch: dict[str, Any]) -> tuple[Tensor, Tensor, Tensor]:
+    """(B, P, T, 262) scenes -> rows (R, T, 262) of present people, mask (R, T), people (B, P).
+
+    ``people[s, k]`` is the row of person k of scene s, or -1 when the slot is empty.
+    """
+    feats, mask, present = batch["features"], batch["mask"], batch["people_mask"]
+    b, p = present.shape
+    rows = feats[present]
+    row_mask = mask[:, None, :].expand(b, p, -1)[present]
+    people = torch.full((b, p), -1, dtype=torch.long, device=feats.device)
+    people[present] = torch.arange(int(present.sum()), device=feats.device)
+    return rows, row_mask, people
+
+
+def mpjpe(x_hat: Tensor, x: Tensor, mask: Tensor, normalizer: Normalizer) -> Tensor:
+    """Mean per-joint position error (m) over valid frames."""
+    pred = normalizer.denormalize(x_hat)[..., POS].reshape(*x.shape[:2], 22, 3)
+    true = normalizer.denormalize(x)[..., POS].reshape(*x.shape[:2], 22, 3)
+    err = (pred - true).norm(dim=-1).mean(-1)
+    return (err * mask).sum() / mask.sum().clamp_min(1)
+
+
+class VAEStage:
+    name = "vae"
+
+    def __init__(self, config: UMFConfig, normalizer: Normalizer, vae: MotionVAE | None = None):
+        self.config = config
+        self.normalizer = normalizer
+        self.vae = vae or MotionVAE(config.vae)
+
+    def modules(self) -> dict[str, nn.Module]:
+        return {"vae": self.vae}
+
+    def trainable(self) -> nn.Module:
+        return self.vae
+
+    def _losses(self, batch: dict[str, Any]) -> tuple[dict[str, Tensor], Tensor, Tensor, Tensor]:
+        people = None
+        if _is_scene(batch):
+            x, mask, people = flatten_scenes(batch)
+        else:
+            x, mask = batch["features"], batch["mask"]
+        out = self.vae(x, mask)
+        losses = vae_losses(out, x, mask, self.normalizer, self.config.vae, people=people)
+        return losses, out.x_hat, x, mask
+
+    def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
+        return self._losses(batch)[0]
+
+    @torch.no_grad()
+    def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
+        losses, x_hat, x, mask = self._losses(batch)
+        out = {k: float(v) for k, v in losses.items()}
+        out["mpjpe_m"] = float(mpjpe(x_hat, x, mask, self.normalizer))
+        return out
+
+
+class _LatentStage:
+    """Shared by the flow stages: frozen VAE encoder and cached frozen text features."""
+
+    def __init__(self, config: UMFConfig, vae: MotionVAE, text: TextFeatureCache):
+        self.config = config
+        self.vae = vae.eval().requires_grad_(False)
+        self.text = text
+
+    @torch.no_grad()
+    def latents(self, x: Tensor, mask: Tensor) -> Tensor:
+        """Deterministic latents (the posterior means) of normalised features."""
+        self.vae.eval()
+        mu, _ = self.vae.encode(x, mask)
+        return mu
+
+    def encode_text(self, captions: list[str], device) -> tuple[TextFeatures, TextFeatures]:
+        text = self.text.encode(captions).to(device)
+        uncond = self.text.encode([""] * len(captions)).to(device)
+        return text, uncond
+
+
+class PFlowStage(_LatentStage):
+    name = "pflow"
+
+    def __init__(self, config, vae, text, pflow: PFlow | None = None, seed: int = 0):
+        super().__init__(config, vae, text)
+        p, r = vae.latent_shape
+        self.pflow = pflow or PFlow(config.pflow, p, r, text.encoder.dim)
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def modules(self) -> dict[str, nn.Module]:
+        return {"pflow": self.pflow, "vae": self.vae}
+
+    def trainable(self) -> nn.Module:
+        return self.pflow
+
+    def _inputs(self, batch):
+        if _is_scene(batch):  # person 1 of each scene, multi-person corpus
+            x, mask = batch["features"][:, 0], batch["mask"]
+            dataset = torch.ones(x.shape[0], dtype=torch.long)
+        else:
+            x, mask = batch["features"], batch["mask"]
+            dataset = batch["dataset"].long()
+        return self.latents(x, mask), dataset.to(x.device), batch["captions"]
+
+    def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
+        z1, dataset, captions = self._inputs(batch)
+        text, uncond = self.encode_text(captions, z1.device)
+        return self.pflow(z1, text, uncond, dataset=dataset, generator=self.generator)
+
+    @torch.no_grad()
+    def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
+        z1, dataset, captions = self._inputs(batch)
+        text, uncond = self.encode_text(captions, z1.device)
+        gen = torch.Generator().manual_seed(1234)  # same noise every validation
+        return {k: float(v) for k, v in self.pflow.loss(z1, text, uncond, dataset, gen).items()}
+
+
+class SFlowStage(_LatentStage):
+    name = "sflow"
+
+    def __init__(self, config, vae, text, sflow: SFlow | None = None, backbone=None, seed: int = 0):
+        super().__init__(config, vae, text)
+        p, r = vae.latent_shape
+        self.sflow = sflow or SFlow(config.sflow, p, r, text.encoder.dim, backbone=backbone)
+        self.generator = torch.Generator().manual_seed(seed)
+
+    def modules(self) -> dict[str, nn.Module]:
+        return {"sflow": self.sflow, "vae": self.vae}
+
+    def trainable(self) -> nn.Module:
+        return self.sflow
+
+    def _inputs(self, batch):
+        rows, mask, people = flatten_scenes(batch)
+        z = self.latents(rows, mask)  # (R, p, r)
+        b, p_max = people.shape
+        lat = z.new_zeros(b, p_max, *z.shape[1:])
+        present = people >= 0
+        lat[present] = z[people[present]]
+        # one reacting person per scene: a random index among persons 2..P of that scene
+        counts = present.sum(1)
+        k = 1 + (torch.rand(b, generator=self.generator) * (counts - 1).clamp_min(1)).long()
+        k = torch.minimum(k, counts - 1).clamp_min(1)
+        prev_mask = torch.arange(p_max)[None, :] < k[:, None]
+        w = lat[torch.arange(b), k]
+        return lat, prev_mask, w, batch["captions"]
+
+    def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
+        prev, prev_mask, w, captions = self._inputs(batch)
+        text, uncond = self.encode_text(captions, w.device)
+        return self.sflow(prev, prev_mask, w, text, uncond, generator=self.generator)
+
+    @torch.no_grad()
+    def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
+        prev, prev_mask, w, captions = self._inputs(batch)
+        text, uncond = self.encode_text(captions, w.device)
+        gen = torch.Generator().manual_seed(1234)
+        losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen)
+        return {k: float(v) for k, v in losses.items()}

@@ -1,0 +1,251 @@
+import math
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import BANDAI_FIXTURE
+from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+from umf.data.scenes import yaw_rotate
+from umf.errors import UMFError
+from umf.representation import (
+    CONTACT,
+    FEATURE_DIM,
+    POS,
+    ROT,
+    assemble_features,
+    features_to_joints,
+    heading_angle,
+    joints_to_rot6d,
+    mirror_features,
+)
+from umf.train import datasets as D
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    out = tmp_path_factory.mktemp("train-corpus")
+    cfg = PrepareConfig(train_scenes=8, val_scenes=2, test_scenes=2, test_groups=2)
+    prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=lambda s: None)
+    return Corpus.load(out)
+
+
+def _raw(item_features: torch.Tensor, corpus: Corpus) -> torch.Tensor:
+    return corpus.normalizer.denormalize(item_features.double())
+
+
+def _assert_canonical(features: torch.Tensor, atol: float = 1e-4) -> None:
+    """Person 1 (features (P, T, 262) or (T, 262)) starts over the origin facing +Z."""
+    first = features if features.ndim == 2 else features[0]
+    joints0 = features_to_joints(first[0])
+    assert abs(float(joints0[0, 0])) < atol and abs(float(joints0[0, 2])) < atol
+    assert abs(float(heading_angle(joints0))) < 1e-3
+
+
+# --------------------------------------------------------------------- pure functions
+def test_place_features_equals_features_of_moved_joints(real_joints):
+    joints = real_joints[:60]
+    rot6d = joints_to_rot6d(joints)
+    f = assemble_features(joints, rot6d)
+    for yaw, dx, dz in [(0.7, 1.5, -2.0), (-3.0, 0.0, 0.4), (math.pi / 2, -2.5, 2.5)]:
+        moved = torch.from_numpy(yaw_rotate(joints.numpy(), yaw))
+        moved[..., 0] += dx
+        moved[..., 2] += dz
+        want = assemble_features(moved, rot6d)
+        got = D.place_features(f, yaw, dx, dz)
+        torch.testing.assert_close(got, want, atol=1e-9, rtol=0)
+        torch.testing.assert_close(got[:, ROT], f[:, ROT], atol=0, rtol=0)
+        torch.testing.assert_close(got[:, CONTACT], f[:, CONTACT], atol=0, rtol=0)
+
+
+def test_canonicalize_features_is_rigid_and_invariant(corpus):
+    f = torch.from_numpy(corpus.scene_features(corpus.scenes["train"][0])).double()[:, 25:]
+    canon = D.canonicalize_features(f)
+    _assert_canonical(canon, atol=1e-9)
+    # heights are kept, and any rigid placement of the input gives the same canonical form
+    torch.testing.assert_close(canon[..., 1:66:3], f[..., 1:66:3])
+    moved = D.place_features(f, 2.1, -1.3, 0.8)
+    torch.testing.assert_close(D.canonicalize_features(moved), canon, atol=1e-9, rtol=0)
+    # relative placement of person 2 is unchanged (pairwise distances preserved)
+    d = lambda x: (x[0, :, 0:3] - x[1, :, 0:3]).norm(dim=-1)  # noqa: E731
+    torch.testing.assert_close(d(canon), d(f))
+    single = D.canonicalize_features(f[1])
+    _assert_canonical(single, atol=1e-9)
+
+
+def test_mirror_caption_swaps_sides_and_is_an_involution():
+    cases = {
+        "A person raises the right hand and waves.": "A person raises the left hand and waves.",
+        "Left foot first, then RIGHT.": "Right foot first, then LEFT.",
+        "They circle clockwise, then counterclockwise.": (
+            "They circle counterclockwise, then clockwise."
+        ),
+        "turns counter-clockwise": "turns clockwise",
+        "walks leftward": "walks rightward",
+        "the leftover bright light": "the leftover bright light",
+    }
+    for text, want in cases.items():
+        assert D.mirror_caption(text) == want
+    for text in [*list(cases)[:3], "walks leftward"]:
+        assert D.mirror_caption(D.mirror_caption(text)) == text
+
+
+def test_crop_window_in_range():
+    rng = np.random.default_rng(0)
+    for _ in range(200):
+        total = int(rng.integers(1, 200))
+        start, length = D.crop_window(rng, total, 30, 120)
+        assert min(30, total) <= length <= min(120, total)
+        assert 0 <= start and start + length <= total
+
+
+# --------------------------------------------------------------------- single person
+def test_single_dataset_items(corpus):
+    norm = corpus.normalizer
+    ds = D.SingleMotionDataset(corpus, "train", norm, 20, 60, random_placement=False, mirror=True)
+    assert len(ds) == len(corpus.split_clips("train"))
+    seen_mirrored = set()
+    for i in range(len(ds)):
+        it = ds[i]
+        f = it["features"]
+        assert f.dtype == torch.float32 and f.shape == (it["length"], FEATURE_DIM)
+        assert 20 <= it["length"] <= 60 and it["dataset"] == D.SINGLE_PERSON
+        assert isinstance(it["caption"], str) and it["caption"]
+        _assert_canonical(_raw(f, corpus))
+        seen_mirrored.add(it["mirrored"])
+    assert seen_mirrored == {True, False}
+    # an item depends only on (seed, epoch, index)
+    torch.testing.assert_close(ds[3]["features"], ds[3]["features"])
+    first = ds[3]
+    ds.set_epoch(1)
+    assert ds[3]["start"] != first["start"] or ds[3]["length"] != first["length"]
+
+
+def test_single_dataset_mirroring_matches_mirror_features(corpus):
+    kw = dict(min_frames=20, max_frames=60, random_placement=False, seed=5)
+    plain = D.SingleMotionDataset(corpus, "train", None, mirror=False, **kw)
+    mirror = D.SingleMotionDataset(corpus, "train", None, mirror=True, **kw)
+    checked = 0
+    for i in range(len(plain)):
+        a, b = plain[i], mirror[i]
+        assert (a["start"], a["length"]) == (b["start"], b["length"])
+        if b["mirrored"]:
+            torch.testing.assert_close(b["features"], mirror_features(a["features"]))
+            assert b["caption"] == D.mirror_caption(a["caption"])
+            torch.testing.assert_close(mirror_features(b["features"]), a["features"])
+            checked += 1
+    assert checked > 0
+
+
+def test_single_dataset_random_placement(corpus):
+    ds = D.SingleMotionDataset(
+        corpus, "train", None, 20, 60, random_placement=True, mirror=False, placement_radius=2.0
+    )
+    headings = []
+    for i in range(len(ds)):
+        joints0 = features_to_joints(ds[i]["features"][0])
+        assert float(joints0[0, [0, 2]].abs().max()) <= 2.0 + 1e-4
+        headings.append(float(heading_angle(joints0)))
+    assert np.ptp(headings) > 1.0  # people face many directions
+
+
+def test_single_dataset_empty_split_is_an_error(corpus):
+    with pytest.raises(UMFError, match="no clips"):
+        D.SingleMotionDataset(corpus, "nope", None)
+    with pytest.raises(UMFError, match="min_frames"):
+        D.SingleMotionDataset(corpus, "train", None, 50, 20)
+
+
+# --------------------------------------------------------------------- scenes
+def test_crop_recipe_equals_cropped_scene(corpus):
+    actors = corpus.actors()
+    for recipe in corpus.scenes["train"][:4]:
+        full = corpus.scene_features(recipe)
+        n = full.shape[1]
+        for start, length in [(0, 20), (n - 25, 25), (n // 2, n - n // 2)]:
+            crop = corpus.scene_features(D.crop_recipe(recipe, actors, start, length + 1))
+            np.testing.assert_allclose(crop, full[:, start : start + length], atol=1e-5)
+
+
+def test_scene_dataset_items(corpus):
+    norm = corpus.normalizer
+    ds = D.SceneDataset(corpus, "train", norm, 20, 80, mirror=True, seed=1)
+    assert len(ds) == len(corpus.scenes["train"])
+    for i in range(len(ds)):
+        it = ds[i]
+        f = it["features"]
+        assert f.shape == (it["num_people"], it["length"], FEATURE_DIM)
+        assert it["num_people"] == 2 and it["dataset"] == D.MULTI_PERSON
+        assert 20 <= it["length"] <= 80
+        _assert_canonical(_raw(f, corpus))
+    groups = D.SceneDataset(corpus, "test_groups", norm, 20, 80, max_people=8)
+    assert all(groups[i]["num_people"] >= 3 for i in range(len(groups)))
+    with pytest.raises(UMFError, match="no multi-person"):
+        D.SceneDataset(corpus, "test_groups", norm, max_people=2)
+
+
+def test_scene_crop_matches_recanonicalised_full_scene(corpus):
+    ds = D.SceneDataset(corpus, "train", None, 20, 80, mirror=False, seed=2)
+    it = ds[0]
+    full = torch.from_numpy(corpus.scene_features(corpus.scenes["train"][0]))
+    want = D.canonicalize_features(full[:, it["start"] : it["start"] + it["length"]])
+    torch.testing.assert_close(it["features"], want, atol=1e-5, rtol=0)
+    assert not torch.equal(it["features"][:, :, POS], full[:, : it["length"], POS])
+
+
+# --------------------------------------------------------------------- batching
+def test_collate_single_pads_and_masks(corpus):
+    ds = D.SingleMotionDataset(corpus, "train", corpus.normalizer, 10, 50)
+    items = [ds[i] for i in range(4)]
+    b = D.collate_single(items)
+    t = max(it["length"] for it in items)
+    assert b["features"].shape == (4, t, FEATURE_DIM) and b["mask"].shape == (4, t)
+    for i, it in enumerate(items):
+        n = it["length"]
+        assert b["mask"][i].sum() == n and bool(b["mask"][i, :n].all())
+        torch.testing.assert_close(b["features"][i, :n], it["features"])
+        assert float(b["features"][i, n:].abs().sum()) == 0.0
+    assert b["dataset"].dtype == torch.long and b["captions"] == [it["caption"] for it in items]
+    assert b["lengths"].tolist() == [it["length"] for it in items] and len(b["ids"]) == 4
+
+
+def test_collate_scenes_pads_people_and_time(corpus):
+    pairs = D.SceneDataset(corpus, "train", corpus.normalizer, 10, 40)
+    groups = D.SceneDataset(corpus, "test_groups", corpus.normalizer, 10, 40)
+    items = [pairs[0], groups[0], pairs[1]]
+    b = D.collate_scenes(items)
+    p = max(it["num_people"] for it in items)
+    t = max(it["length"] for it in items)
+    assert b["features"].shape == (3, p, t, FEATURE_DIM)
+    assert b["mask"].shape == (3, t) and b["people_mask"].shape == (3, p)
+    for i, it in enumerate(items):
+        n_p, n_t = it["num_people"], it["length"]
+        assert b["people_mask"][i].sum() == n_p and b["mask"][i].sum() == n_t
+        torch.testing.assert_close(b["features"][i, :n_p, :n_t], it["features"])
+        assert float(b["features"][i, n_p:].abs().sum()) == 0.0
+    assert b["num_people"].tolist() == [it["num_people"] for it in items]
+
+
+def test_mixed_batches_alternate(corpus):
+    single = D.SingleMotionDataset(corpus, "train", corpus.normalizer, 10, 30)
+    scenes = D.SceneDataset(corpus, "train", corpus.normalizer, 10, 30)
+    a = D.make_loader(single, 4, shuffle=True)
+    b = D.make_loader(scenes, 4, shuffle=True)
+    batches = list(D.MixedBatches(a, b))
+    kinds = ["people_mask" in x for x in batches]
+    assert kinds[:4] == [False, True, False, True]
+    assert len(batches) >= 2 * max(len(a), len(b)) - 1
+
+
+def test_sharded_sampler_shards_and_resumes():
+    s0 = D.ShardedSampler(10, shuffle=True, seed=3, rank=0, world_size=3)
+    s1 = D.ShardedSampler(10, shuffle=True, seed=3, rank=1, world_size=3)
+    s2 = D.ShardedSampler(10, shuffle=True, seed=3, rank=2, world_size=3)
+    shards = [list(s) for s in (s0, s1, s2)]
+    assert all(len(s) == 4 for s in shards) and set().union(*shards) == set(range(10))
+    epoch0 = list(s0)
+    s0.set_epoch(1)
+    assert list(s0) != epoch0
+    s0.set_epoch(0)
+    s0.start = 2
+    assert list(s0) == epoch0[2:] and len(s0) == 2
