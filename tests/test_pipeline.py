@@ -1,0 +1,133 @@
+"""End to end on the bundled real clips: train all stages briefly, export, load, generate."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import BANDAI_FIXTURE
+from umf.config import set_option, small_config
+from umf.data.corpus import PrepareConfig, prepare_corpus
+from umf.errors import UMFError
+from umf.pipeline import UMFPipeline
+from umf.train.run import Launch, export_model, train_stage
+
+TINY = [
+    "vae.d_model=32", "vae.num_layers=3", "vae.ff_dim=64", "vae.num_tokens=4",
+    "vae.latent_dim=8", "vae.max_frames=120",
+    "pflow.denoiser.d_model=32", "pflow.denoiser.num_layers=3", "pflow.denoiser.ff_dim=64",
+    "pflow.denoiser.text_width=32", "pflow.denoiser.text_heads=2", "pflow.denoiser.text_ff_dim=64",
+    "pflow.steps=[4,2]",
+    "sflow.denoiser.d_model=32", "sflow.denoiser.num_layers=3", "sflow.denoiser.ff_dim=64",
+    "sflow.denoiser.text_width=32", "sflow.denoiser.text_heads=2", "sflow.denoiser.text_ff_dim=64",
+    "sflow.context_ff_dim=32", "sflow.steps=3",
+]  # fmt: skip
+for s in ("vae", "pflow", "sflow"):
+    TINY += [
+        f"train_{s}.{k}"
+        for k in (
+            "batch_size=4",
+            "max_steps=4",
+            "val_every=2",
+            "ckpt_every=2",
+            "warmup_steps=1",
+            "max_frames=60",
+        )
+    ]
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory):
+    root = tmp_path_factory.mktemp("e2e")
+    prepare_corpus(root / "corpus", {"bandai": BANDAI_FIXTURE},
+                   PrepareConfig(train_scenes=12, val_scenes=4, test_scenes=4, test_groups=2),
+                   progress=False, log=lambda s: None)  # fmt: skip
+    cfg = small_config()
+    for o in TINY:
+        cfg = set_option(cfg, o)
+    launch = Launch(progress=False)
+    summaries = {
+        s: train_stage(s, root / "corpus", root / "run", cfg, launch, log=lambda m: None)
+        for s in ("vae", "pflow", "sflow")
+    }
+    model = export_model(root / "run", root / "model")
+    return root, model, summaries
+
+
+def test_all_stages_train_and_export(trained):
+    root, model, summaries = trained
+    for s, summary in summaries.items():
+        assert summary["steps"] == 4, s
+        assert (root / "run" / s / "metrics.csv").exists()
+        assert (root / "run" / s / "loss_curves.png").exists()
+    assert {p.name for p in model.iterdir()} >= {
+        "format.json", "config.json", "vae.safetensors", "pflow.safetensors",
+        "sflow.safetensors", "normalizer.safetensors",
+    }  # fmt: skip
+
+
+@pytest.mark.parametrize("num_people", [1, 3])
+def test_generate_any_number_of_people(trained, num_people, tmp_path):
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    scenes = pipe(["two people bow to each other", "a person waves"], num_people=num_people,
+                  seconds=2.0, seed=3)  # fmt: skip
+    assert len(scenes) == 2
+    for s in scenes:
+        assert s.joints.shape == (num_people, 60, 22, 3)
+        assert s.features.shape == (num_people, 60, 262)
+        assert np.isfinite(s.joints).all()
+    again = pipe(["two people bow to each other", "a person waves"], num_people=num_people,
+                 seconds=2.0, seed=3)  # fmt: skip
+    assert np.array_equal(again[0].joints, scenes[0].joints)  # seeded
+    other = pipe("two people bow to each other", num_people=num_people, seconds=2.0, seed=4)
+    assert not np.array_equal(other[0].joints, scenes[0].joints)
+    path = scenes[0].save_npz(tmp_path / "scene.npz")
+    with np.load(path) as z:
+        assert z["joints"].shape == (num_people, 60, 22, 3) and str(z["text"]).startswith("two")
+
+
+def test_nfe_follows_the_step_budget(trained):
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    s = pipe("a person walks", num_people=3, seconds=1.0, seed=0)[0]
+    # P-Flow 4 + 2 steps, S-Flow 3 steps for each of the 2 further people (Euler: 1 NFE/step)
+    assert s.meta["nfe"] == 6 + 2 * 3
+
+
+def test_bad_requests(trained):
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    with pytest.raises(UMFError, match="empty"):
+        pipe("  ", num_people=2)
+    with pytest.raises(UMFError, match="people"):
+        pipe("hi", num_people=0)
+    with pytest.raises(UMFError, match="seconds"):
+        pipe("hi", num_people=2, seconds=100.0)
+    with pytest.raises(UMFError, match="model not found"):
+        UMFPipeline.from_pretrained(model.parent / "nope")
+
+
+def test_corrupt_model_is_one_clear_error(trained, tmp_path):
+    import shutil
+
+    _, model, _ = trained
+    bad = tmp_path / "bad"
+    shutil.copytree(model, bad)
+    (bad / "pflow.safetensors").write_bytes(b"garbage")
+    with pytest.raises(UMFError, match="pflow"):
+        UMFPipeline.from_pretrained(bad)
+    (bad / "pflow.safetensors").unlink()
+    with pytest.raises(UMFError):
+        UMFPipeline.from_pretrained(bad)
+
+
+def test_react_keeps_the_actor(trained, bandai_clips):
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    actor = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001").joints[0][:61]
+    s = pipe("two people bow to each other", num_people=2, actor=actor, seed=0)[0]
+    assert s.joints.shape == (2, 60, 22, 3)
+    assert np.allclose(s.joints[0], actor[:60])
+    assert torch.isfinite(torch.from_numpy(s.joints)).all()
