@@ -84,6 +84,29 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig):
     return scenes("train", True), scenes("val", False)
 
 
+def _bank_loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae, progress):
+    """Loaders over latent banks: ``t.latent_passes`` epochs of crops, encoded once."""
+    from umf.train.latents import LatentBankDataset, build_bank
+
+    norm = corpus.normalizer
+    kw = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
+
+    def bank(split: str, kind: str, passes: int):
+        if kind == "single":
+            ds = SingleMotionDataset(corpus, split, norm, mirror=True, seed=t.seed, **kw)
+        else:
+            ds = SceneDataset(corpus, split, norm, mirror=True, seed=t.seed, **kw)
+        b = build_bank(vae, ds, passes, progress=progress, desc=f"latents {kind} {split}")
+        lat = LatentBankDataset(b, first_person_only=(stage == "pflow"))
+        return make_loader(lat, t.batch_size, shuffle=split == "train", seed=t.seed)
+
+    passes = t.latent_passes
+    if stage == "pflow":
+        return (MixedBatches(bank("train", "single", passes), bank("train", "scene", passes)),
+                MixedBatches(bank("val", "single", 1), bank("val", "scene", 1)))  # fmt: skip
+    return bank("train", "scene", passes), bank("val", "scene", 1)
+
+
 def _load_frozen(path: Path, name: str, module: torch.nn.Module) -> None:
     ck = find_checkpoint(path)
     if ck is None:
@@ -173,7 +196,10 @@ def train_stage(
                 _load_frozen(best_or_last(run_dir / "pflow"), "pflow", pflow)
                 backbone = pflow.net
             st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed)
-    train_loader, val_loader = _loaders(stage, corpus, cfg, t)
+    if stage != "vae" and t.latent_passes > 0:
+        train_loader, val_loader = _bank_loaders(stage, corpus, cfg, t, st.vae, launch.progress)
+    else:
+        train_loader, val_loader = _loaders(stage, corpus, cfg, t)
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
     return train(
         st, train_loader, val_loader, t, run_dir / stage,

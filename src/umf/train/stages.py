@@ -121,6 +121,9 @@ class PFlowStage(_LatentStage):
         return self.pflow
 
     def _inputs(self, batch):
+        if "z" in batch:  # from a latent bank
+            z1 = batch["z"][:, 0]
+            return z1, batch["dataset"].long().to(z1.device), batch["captions"]
         if _is_scene(batch):  # person 1 of each scene, multi-person corpus
             x, mask = batch["features"][:, 0], batch["mask"]
             dataset = torch.ones(x.shape[0], dtype=torch.long)
@@ -158,12 +161,15 @@ class SFlowStage(_LatentStage):
         return self.sflow
 
     def _inputs(self, batch):
-        rows, mask, people = flatten_scenes(batch)
-        z = self.latents(rows, mask)  # (R, p, r)
-        b, p_max = people.shape
-        lat = z.new_zeros(b, p_max, *z.shape[1:])
-        present = people >= 0
-        lat[present] = z[people[present]]
+        if "z" in batch:  # from a latent bank
+            lat, present = batch["z"], batch["people_mask"]
+        else:
+            rows, mask, people = flatten_scenes(batch)
+            z = self.latents(rows, mask)  # (R, p, r)
+            present = people >= 0
+            lat = z.new_zeros(*people.shape, *z.shape[1:])
+            lat[present] = z[people[present]]
+        b, p_max = present.shape
         # one reacting person per scene: a random index among persons 2..P of that scene
         counts = present.sum(1)
         k = 1 + (torch.rand(b, generator=self.generator) * (counts - 1).clamp_min(1)).long()
