@@ -35,6 +35,7 @@ for s in ("vae", "pflow", "sflow"):
             "max_frames=60",
         )
     ]
+TINY += ["train_pflow.latent_passes=2"]  # P-Flow from a latent bank, S-Flow per batch
 
 
 @pytest.fixture(scope="module")
