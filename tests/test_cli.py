@@ -17,7 +17,8 @@ def umf(*args: str, cwd=None) -> subprocess.CompletedProcess:
 
 
 def test_help_everywhere():
-    for args in ([], ["data"], ["data", "prepare"], ["data", "show"], ["data", "info"]):
+    for args in ([], ["data"], ["data", "prepare"], ["data", "show"], ["data", "info"],
+                 ["train"], ["train", "vae"], ["train", "all"], ["train", "export"]):  # fmt: skip
         r = umf(*args, "--help")
         assert r.returncode == 0, r.stderr
         assert "Usage" in r.stdout
@@ -81,6 +82,10 @@ def test_show_reads_bvh_and_npz(tmp_path):
         (["data", "info", "/nonexistent"], "not a umf corpus"),
         (["data", "show", "missing.npz", "--out", "a.gif"], "file not found"),
         (["data", "show", "some-id", "--out", "a.gif"], "--corpus"),
+        (["train", "vae", "--corpus", "/nonexistent", "--out", "run"], "not a umf corpus"),
+        (["train", "vae", "--corpus", "c", "--out", "run", "--family", "huge"], "unknown config"),
+        (["train", "vae", "--corpus", "c", "--out", "run", "--set", "vae.nope=1"], "nope"),
+        (["train", "export", "--run", "nowhere", "--out", "m"], "config"),
     ],
 )
 def test_errors_are_one_line(args, needle, tmp_path):

@@ -84,6 +84,9 @@ def test_generate_any_number_of_people(trained, num_people, tmp_path):
     assert np.array_equal(again[0].joints, scenes[0].joints)  # seeded
     other = pipe("two people bow to each other", num_people=num_people, seconds=2.0, seed=4)
     assert not np.array_equal(other[0].joints, scenes[0].joints)
+    rot = scenes[0].rotations()
+    assert rot.shape == (num_people, 60, 22, 3, 3)
+    assert np.allclose(np.linalg.det(rot), 1.0, atol=1e-4)
     path = scenes[0].save_npz(tmp_path / "scene.npz")
     with np.load(path) as z:
         assert z["joints"].shape == (num_people, 60, 22, 3) and str(z["text"]).startswith("two")

@@ -50,6 +50,17 @@ class Scene:
     def num_frames(self) -> int:
         return int(self.joints.shape[1])
 
+    def rotations(self) -> np.ndarray:
+        """Local joint rotations (N, T, 22, 3, 3): joints 1..21 from the features' 6-D
+        slots, the root from the joints (inverse kinematics); what BVH/glTF exports use."""
+        from umf.representation import features_to_local_rotations
+        from umf.skeleton import inverse_kinematics
+
+        feats = torch.from_numpy(self.features)
+        local = features_to_local_rotations(feats)
+        root = inverse_kinematics(torch.from_numpy(self.joints))[..., :1, :, :]
+        return torch.cat([root.to(local), local], dim=-3).numpy()
+
     def save_npz(self, path: str | Path) -> Path:
         from umf.io import save_npz_atomic
 
