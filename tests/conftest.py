@@ -26,3 +26,16 @@ def real_joints(bandai_clips):
     """One real walking clip, (T, 22, 3) float64 torch, for maths tests."""
     clip = next(c for c in bandai_clips if c.id == "dataset-1_walk_normal_001")
     return torch.from_numpy(clip.joints[0]).double()
+
+
+# A tiny UMF (every stage a few thousand parameters) for end-to-end and ablation tests.
+TINY_MODEL = [
+    "vae.d_model=32", "vae.num_layers=3", "vae.ff_dim=64", "vae.num_tokens=4",
+    "vae.latent_dim=8", "vae.max_frames=120",
+    "pflow.denoiser.d_model=32", "pflow.denoiser.num_layers=3", "pflow.denoiser.ff_dim=64",
+    "pflow.denoiser.text_width=32", "pflow.denoiser.text_heads=2", "pflow.denoiser.text_ff_dim=64",
+    "pflow.steps=[4,2]",
+    "sflow.denoiser.d_model=32", "sflow.denoiser.num_layers=3", "sflow.denoiser.ff_dim=64",
+    "sflow.denoiser.text_width=32", "sflow.denoiser.text_heads=2", "sflow.denoiser.text_ff_dim=64",
+    "sflow.context_ff_dim=32", "sflow.steps=3",
+]  # fmt: skip

@@ -5,6 +5,7 @@ from __future__ import annotations
 import pytest
 import torch
 
+from conftest import TINY_MODEL
 from umf.config import set_option, small_config
 from umf.models.pflow import PFlow
 from umf.models.sflow import SFlow
@@ -12,16 +13,7 @@ from umf.models.vae import MotionVAE, vae_losses
 from umf.representation import Normalizer
 from umf.text import TextFeatures
 
-TINY = [
-    "vae.d_model=32", "vae.num_layers=3", "vae.ff_dim=64", "vae.num_tokens=16",
-    "vae.latent_dim=8", "vae.max_frames=40",
-    "pflow.denoiser.d_model=32", "pflow.denoiser.num_layers=3", "pflow.denoiser.ff_dim=64",
-    "pflow.denoiser.text_width=32", "pflow.denoiser.text_heads=2", "pflow.denoiser.text_ff_dim=64",
-    "pflow.steps=[3,2]",
-    "sflow.denoiser.d_model=32", "sflow.denoiser.num_layers=3", "sflow.denoiser.ff_dim=64",
-    "sflow.denoiser.text_width=32", "sflow.denoiser.text_heads=2", "sflow.denoiser.text_ff_dim=64",
-    "sflow.context_ff_dim=32", "sflow.steps=3",
-]  # fmt: skip
+TINY = [*TINY_MODEL, "vae.num_tokens=16", "vae.max_frames=40", "pflow.steps=[3,2]"]
 
 ABLATIONS = {
     "full": [],

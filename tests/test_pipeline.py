@@ -6,23 +6,14 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import BANDAI_FIXTURE
+from conftest import BANDAI_FIXTURE, TINY_MODEL
 from umf.config import set_option, small_config
 from umf.data.corpus import PrepareConfig, prepare_corpus
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline
 from umf.train.run import Launch, export_model, train_stage
 
-TINY = [
-    "vae.d_model=32", "vae.num_layers=3", "vae.ff_dim=64", "vae.num_tokens=4",
-    "vae.latent_dim=8", "vae.max_frames=120",
-    "pflow.denoiser.d_model=32", "pflow.denoiser.num_layers=3", "pflow.denoiser.ff_dim=64",
-    "pflow.denoiser.text_width=32", "pflow.denoiser.text_heads=2", "pflow.denoiser.text_ff_dim=64",
-    "pflow.steps=[4,2]",
-    "sflow.denoiser.d_model=32", "sflow.denoiser.num_layers=3", "sflow.denoiser.ff_dim=64",
-    "sflow.denoiser.text_width=32", "sflow.denoiser.text_heads=2", "sflow.denoiser.text_ff_dim=64",
-    "sflow.context_ff_dim=32", "sflow.steps=3",
-]  # fmt: skip
+TINY = list(TINY_MODEL)
 for s in ("vae", "pflow", "sflow"):
     TINY += [
         f"train_{s}.{k}"
