@@ -76,6 +76,23 @@ class Scene:
         )
         return Path(path)
 
+    def save_bvh(self, path_pattern: str | Path) -> list[Path]:
+        """One SMPL-22 BVH per person (metres, shared scene frame); ``{i}`` in the name is
+        replaced by the person number. Rotations come from inverse kinematics against each
+        person's own bone lengths, so forward kinematics reproduces the joints."""
+        from umf.data.bvh import write_smpl22_bvh
+        from umf.skeleton import fit_offsets, inverse_kinematics
+
+        out = []
+        for i, person in enumerate(torch.from_numpy(self.joints).double(), start=1):
+            offsets = fit_offsets(person)
+            local = inverse_kinematics(person, offsets)
+            path = Path(str(path_pattern).format(i=i))
+            write_smpl22_bvh(path, local.numpy(), person[:, 0].numpy(), offsets.numpy(),
+                             self.fps)  # fmt: skip
+            out.append(path)
+        return out
+
     def render(self, path: str | Path, **kwargs: Any) -> Path:
         from umf.render import render_animation
 

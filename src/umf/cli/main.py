@@ -8,6 +8,7 @@ import typer
 
 from umf import __version__
 from umf.cli.data import app as data_app
+from umf.cli.generate import generate
 from umf.cli.train import app as train_app
 from umf.errors import UMFError
 
@@ -20,6 +21,7 @@ app = typer.Typer(
 )
 app.add_typer(data_app, name="data")
 app.add_typer(train_app, name="train")
+app.command("generate")(generate)
 
 
 def _version(value: bool) -> None:
