@@ -81,8 +81,18 @@ def test_checks_catch_violations(actors):
     # putting both on the same spot is caught as contact
     same = dict(recipe, people=[recipe["people"][0], dict(recipe["people"][1], xz=[0.1, 0.0])])
     assert not check(S.build_scene(same, by_id), {"type": "no_contact"}).passed
-    # side: moving person 2 from left to right flips the check
     assert check(j, {"type": "distance", "a": 0, "b": 1, "min": 1.2, "max": 3.2}).passed
+    # side: moving the partner of a side-by-side walk to the other side flips the check
+    walk = next(
+        r
+        for r in S.compose_corpus(actors, 20, (2,), seed=3)
+        if r["relation"] == "walk_side_by_side"
+    )
+    side = next(c for c in walk["constraints"] if c["type"] == "side")
+    assert check(S.build_scene(walk, by_id), side).passed
+    p2 = walk["people"][1]
+    moved = dict(walk, people=[walk["people"][0], dict(p2, xz=[-p2["xz"][0], p2["xz"][1]])])
+    assert not check(S.build_scene(moved, by_id), side).passed
 
 
 def test_time_layout():

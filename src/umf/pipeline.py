@@ -13,7 +13,6 @@ loads a model directory written by ``umf train``.
 from __future__ import annotations
 
 import json
-import math
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -97,10 +96,6 @@ class Scene:
         from umf.render import render_animation
 
         return render_animation(self.joints, path, caption=self.text, fps=self.fps, **kwargs)
-
-
-def _text_features(encoder, texts: Sequence[str]):
-    return encoder.encode(list(texts))
 
 
 class UMFPipeline:
@@ -213,8 +208,8 @@ class UMFPipeline:
         gen = torch.Generator(device="cpu")
         gen.manual_seed(int(seed) if seed is not None else torch.seed())
         b = len(prompts)
-        text = _text_features(self.text_encoder, prompts).to(self.device)
-        uncond = _text_features(self.text_encoder, [""] * b).to(self.device)
+        text = self.text_encoder.encode(prompts).to(self.device)
+        uncond = self.text_encoder.encode([""] * b).to(self.device)
         nfe = 0
         if actor is not None:
             t = actor.shape[0] - 1  # T joint frames are T - 1 feature frames
@@ -289,7 +284,3 @@ class UMFPipeline:
 def default_model_dir() -> Path:
     """Where the bundled model lives inside the installed package."""
     return Path(__file__).parent / "assets" / "model"
-
-
-def frames_for(seconds: float, fps: float = 30.0) -> int:
-    return math.floor(seconds * fps + 0.5)

@@ -21,7 +21,6 @@ import torch
 
 from umf.data.relations import CONTACT_DISTANCE, action_onset, check_record
 from umf.representation import assemble_features, canonical_transform, mirror_joints, mirror_rot6d
-from umf.skeleton import NUM_JOINTS
 
 MAX_FRAMES = 300
 MIN_FRAMES = 30
@@ -127,9 +126,6 @@ def forward_travel(joints: np.ndarray) -> np.ndarray:
 
 
 # --------------------------------------------------------------------- relations
-@dataclass
-class Role:
-    contents: tuple[str, ...]
 
 
 @dataclass
@@ -173,6 +169,16 @@ def _aligned_delay(leader: Actor, follower: Actor, lag: int) -> tuple[int, int]:
     return (shift, 0) if shift >= 0 else (0, -shift)
 
 
+def _frames_while(ok: np.ndarray) -> int:
+    """Frames from the start for which ``ok`` holds (a scene is cut where it first fails)."""
+    bad = np.flatnonzero(~ok)
+    return int(bad[0]) if len(bad) else len(ok)
+
+
+def _facing_each_other() -> list[dict]:
+    return [{"type": "faces", "a": 0, "b": 1}, {"type": "faces", "a": 1, "b": 0}]
+
+
 def _no_contact() -> dict:
     return {"type": "no_contact", "min_distance": CONTACT_DISTANCE}
 
@@ -184,8 +190,7 @@ def _face_each_other(rng, actors, lag: int | None):
     n = _length(actors, [0, delay], [0, start])
     people = [_person(a, 0.0, (0.0, 0.0)), _person(b, np.pi, (0.0, d), delay, start)]
     cons = [
-        {"type": "faces", "a": 0, "b": 1},
-        {"type": "faces", "a": 1, "b": 0},
+        *_facing_each_other(),
         {"type": "distance", "a": 0, "b": 1, "min": 1.2, "max": 3.2},
         _no_contact(),
     ]
@@ -257,8 +262,7 @@ def _follow(rng, actors):
     ta, tb = forward_travel(a.joints), forward_travel(b.joints)
     n = min(len(ta), len(tb), MAX_FRAMES)
     closing = tb[:n] - ta[:n]
-    ok = np.nonzero(gap - closing > 0.9)[0]
-    n = int(ok[-1]) + 1 if len(ok) and ok[0] == 0 else 0
+    n = _frames_while(gap - closing > 0.9)
     if n < MIN_FRAMES:
         return None
     people = [_person(a, 0.0, (0.0, 0.0)), _person(b, 0.0, (0.0, -gap))]
@@ -282,8 +286,7 @@ def _follow_captions(rng, actors, n):
 def _walk_up_to(walker: Actor, dist: float, stop: float = 1.0) -> int:
     """Frames a walker can walk straight ahead before getting within ``stop`` m."""
     travel = forward_travel(walker.joints)
-    ok = np.nonzero(dist - travel > stop)[0]
-    return int(ok[-1]) + 1 if len(ok) else 0
+    return _frames_while(dist - travel > stop)
 
 
 def _call_approach(rng, actors):
@@ -295,8 +298,7 @@ def _call_approach(rng, actors):
         return None
     people = [_person(caller, 0.0, (0.0, 0.0)), _person(walker, np.pi, (0.0, d), delay, start)]
     cons = [
-        {"type": "faces", "a": 0, "b": 1},
-        {"type": "faces", "a": 1, "b": 0},
+        *_facing_each_other(),
         {"type": "approach", "a": 1, "b": 0, "min_change": 0.5},
         _no_contact(),
     ]
@@ -329,8 +331,7 @@ def _step_back(rng, actors):
         _person(defender, np.pi, (0.0, d), delay, start),
     ]
     cons = [
-        {"type": "faces", "a": 0, "b": 1},
-        {"type": "faces", "a": 1, "b": 0},
+        *_facing_each_other(),
         {"type": "retreat", "a": 1, "b": 0, "min_change": 0.4},
         _no_contact(),
     ]
@@ -364,8 +365,7 @@ def _mirror(rng, actors):
     n = _length([a, a], [0, 0])
     people = [_person(a, 0.0, (0.0, 0.0)), _person(a, np.pi, (0.0, d), mirrored=True)]
     cons = [
-        {"type": "faces", "a": 0, "b": 1},
-        {"type": "faces", "a": 1, "b": 0},
+        *_facing_each_other(),
         {"type": "distance", "a": 0, "b": 1, "min": 1.2, "max": 3.0},
         _no_contact(),
     ]
@@ -408,15 +408,13 @@ def _toward_each_other(rng, actors):
     lateral = float(rng.uniform(0.6, 0.9)) * (1 if rng.random() < 0.5 else -1)
     ta, tb = forward_travel(a.joints), forward_travel(b.joints)
     n = min(len(ta), len(tb), MAX_FRAMES)
-    ok = np.nonzero(d - (ta[:n] + tb[:n]) > 1.2)[0]
-    n = int(ok[-1]) + 1 if len(ok) else 0
+    n = _frames_while(d - (ta[:n] + tb[:n]) > 1.2)
     if n < MIN_FRAMES:
         return None
     yaw_b = np.pi
     people = [_person(a, 0.0, (0.0, 0.0)), _person(b, yaw_b, (lateral, d))]
     cons = [
-        {"type": "faces", "a": 0, "b": 1},
-        {"type": "faces", "a": 1, "b": 0},
+        *_facing_each_other(),
         {"type": "approach", "a": 0, "b": 1, "min_change": 0.8},
         _no_contact(),
     ]
@@ -469,8 +467,7 @@ def _single_file(rng, actors):
         [(zs[i] + travel[i][:n]) - (zs[i + 1] + travel[i + 1][:n]) for i in range(n_people - 1)],
         axis=0,
     )
-    ok = np.nonzero(margin > 0.9)[0]
-    n = int(ok[-1]) + 1 if len(ok) and ok[0] == 0 else 0
+    n = _frames_while(margin > 0.9)
     if n < MIN_FRAMES:
         return None
     people = [_person(a, 0.0, (0.0, z)) for a, z in zip(actors, zs, strict=True)]
@@ -751,17 +748,3 @@ def compose_corpus(
         recipe["id"] = f"{rel.name}-{len(recipes):05d}"
         recipes.append(recipe)
     return recipes
-
-
-def scene_frames(recipe: dict[str, Any]) -> int:
-    return int(recipe["num_frames"]) * int(recipe["num_people"])
-
-
-__all__ = [
-    "NUM_JOINTS",
-    "RELATIONS",
-    "Actor",
-    "build_scene",
-    "compose_corpus",
-    "compose_scene",
-]

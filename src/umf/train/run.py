@@ -60,51 +60,39 @@ def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig
     return t
 
 
-def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig):
-    norm = corpus.normalizer
-    kw = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
+def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=None,
+             progress: bool = True):  # fmt: skip
+    """(train, val) loaders of a stage.
 
-    def single(split: str, shuffle: bool, placement: bool):
-        ds = SingleMotionDataset(corpus, split, norm, random_placement=placement,
-                                 mirror=shuffle, seed=t.seed, **kw)  # fmt: skip
-        return make_loader(ds, t.batch_size, shuffle=shuffle, num_workers=t.num_workers,
-                           seed=t.seed)  # fmt: skip
-
-    def scenes(split: str, shuffle: bool):
-        ds = SceneDataset(corpus, split, norm, mirror=shuffle, seed=t.seed, **kw)
-        return make_loader(ds, t.batch_size, shuffle=shuffle, num_workers=t.num_workers,
-                           seed=t.seed)  # fmt: skip
-
-    if stage == "vae":  # people may start anywhere, facing anywhere (SPEC 2)
-        return (MixedBatches(single("train", True, True), scenes("train", True)),
-                MixedBatches(single("val", False, False), scenes("val", False)))  # fmt: skip
-    if stage == "pflow":
-        return (MixedBatches(single("train", True, False), scenes("train", True)),
-                MixedBatches(single("val", False, False), scenes("val", False)))  # fmt: skip
-    return scenes("train", True), scenes("val", False)
-
-
-def _bank_loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae, progress):
-    """Loaders over latent banks: ``t.latent_passes`` epochs of crops, encoded once."""
+    VAE and P-Flow alternate single-person and scene batches (SPEC 6), S-Flow sees scenes
+    only. Only VAE training places people randomly (they may start anywhere, facing
+    anywhere: SPEC 2); only training crops are mirrored. With ``vae`` given, the flows
+    train on a latent bank of ``t.latent_passes`` epochs of crops encoded once.
+    """
     from umf.train.latents import LatentBankDataset, build_bank
 
-    norm = corpus.normalizer
-    kw = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
+    frames = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
 
-    def bank(split: str, kind: str, passes: int):
+    def loader(kind: str, split: str):
+        train = split == "train"
+        common = dict(mirror=train, seed=t.seed, **frames)
         if kind == "single":
-            ds = SingleMotionDataset(corpus, split, norm, mirror=True, seed=t.seed, **kw)
+            place = train and stage == "vae"
+            ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
+                                     **common)  # fmt: skip
         else:
-            ds = SceneDataset(corpus, split, norm, mirror=True, seed=t.seed, **kw)
-        b = build_bank(vae, ds, passes, progress=progress, desc=f"latents {kind} {split}")
-        lat = LatentBankDataset(b, first_person_only=(stage == "pflow"))
-        return make_loader(lat, t.batch_size, shuffle=split == "train", seed=t.seed)
+            ds = SceneDataset(corpus, split, corpus.normalizer, **common)
+        if vae is not None:
+            passes = t.latent_passes if train else 1
+            bank = build_bank(vae, ds, passes, progress=progress, desc=f"latents {kind} {split}")
+            ds = LatentBankDataset(bank, first_person_only=(stage == "pflow"))
+        return make_loader(ds, t.batch_size, shuffle=train, num_workers=t.num_workers,
+                           seed=t.seed)  # fmt: skip
 
-    passes = t.latent_passes
-    if stage == "pflow":
-        return (MixedBatches(bank("train", "single", passes), bank("train", "scene", passes)),
-                MixedBatches(bank("val", "single", 1), bank("val", "scene", 1)))  # fmt: skip
-    return bank("train", "scene", passes), bank("val", "scene", 1)
+    if stage == "sflow":
+        return loader("scene", "train"), loader("scene", "val")
+    return (MixedBatches(loader("single", "train"), loader("scene", "train")),
+            MixedBatches(loader("single", "val"), loader("scene", "val")))  # fmt: skip
 
 
 def _load_frozen(path: Path, name: str, module: torch.nn.Module) -> None:
@@ -196,10 +184,8 @@ def train_stage(
                 _load_frozen(best_or_last(run_dir / "pflow"), "pflow", pflow)
                 backbone = pflow.net
             st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed)
-    if stage != "vae" and t.latent_passes > 0:
-        train_loader, val_loader = _bank_loaders(stage, corpus, cfg, t, st.vae, launch.progress)
-    else:
-        train_loader, val_loader = _loaders(stage, corpus, cfg, t)
+    bank_vae = st.vae if stage != "vae" and t.latent_passes > 0 else None
+    train_loader, val_loader = _loaders(stage, corpus, cfg, t, bank_vae, launch.progress)
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
     return train(
         st, train_loader, val_loader, t, run_dir / stage,
