@@ -9,26 +9,27 @@ OUT    ?= out
 # Full Bandai archives when present (../shared), else the bundled sample clips.
 BANDAI ?= $(firstword $(wildcard ../shared/data/bandai) data/bandai-sample)
 
-.PHONY: install demo test test-slow lint format corpus clean
+.PHONY: install demo test test-slow bench lint format corpus clean
 
 $(STAMP): pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -c requirements.lock -e ".[train,dev]"
+	@# the Khronos glTF validator for the GLB export test (skipped when npm is absent)
+	-command -v npm >/dev/null && npm install --silent --no-audit --no-fund \
+		--prefix $(VENV)/node gltf-validator@2.0.0-dev.3.10
 	touch $(STAMP)
 
 install: $(STAMP)
 
-# Until the model lands (issue 3/4) the main job is the data pipeline on real clips:
-# prepare a corpus from the bundled sample, then render a held-out group scene.
+# The main job on the bundled default model: a 3-person scene in every format, then a
+# reaction to a real captured bow (person 1 from a BVH file, the others generated).
 demo: $(STAMP)
-	$(BIN)/umf data prepare --bandai data/bandai-sample --out $(OUT)/demo-corpus \
-		--train-scenes 40 --val-scenes 10 --test-scenes 10 --test-groups 6
-	$(BIN)/umf data list-items $(OUT)/demo-corpus --split test_groups --limit 6
-	$(BIN)/umf data show "$$($(BIN)/umf data list-items $(OUT)/demo-corpus --split test_groups --limit 1 | cut -f1)" \
-		--corpus $(OUT)/demo-corpus --out $(OUT)/demo-group.gif
-	$(BIN)/umf data show "$$($(BIN)/umf data list-items $(OUT)/demo-corpus --split train --limit 1 | cut -f1)" \
-		--corpus $(OUT)/demo-corpus --out $(OUT)/demo-pair.mp4
+	$(BIN)/umf generate "three people walk side by side" --people 3 --seconds 4 --seed 0 \
+		--format npz,gif,mp4,bvh,glb --out $(OUT)/demo
+	$(BIN)/umf react "two people bow to each other" --people 2 --seed 0 \
+		--actor data/bandai-sample/Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh \
+		--format npz,gif,glb --out $(OUT)/demo
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow"
@@ -36,6 +37,10 @@ test: $(STAMP)
 # Slow checks: the full Bandai corpus (needs ../shared), training to convergence.
 test-slow: $(STAMP)
 	$(BIN)/python -m pytest -q -m slow
+
+# Speed of the bundled model on this machine (figures in the README).
+bench: $(STAMP)
+	$(BIN)/python scripts/benchmark.py --out results/benchmark.json
 
 # The full corpus from ../shared/data/bandai (or BANDAI=...).
 corpus: $(STAMP)

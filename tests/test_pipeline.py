@@ -188,3 +188,121 @@ def test_save_bvh_round_trip(bandai_clips, tmp_path):
         order = [names.index(n) for n in JOINT_NAMES]
         err = np.linalg.norm(pos[:, order] - joints[i, 0:90:11], axis=-1)
         assert err.max() < 0.01, err.max()
+
+
+def test_react_maps_back_into_the_actor_frame(trained, bandai_clips):
+    """Moving and turning the actor moves and turns every generated person the same way:
+    the model sees the actor canonically and the scene goes back to the user's frame."""
+    from umf.representation import RigidTransform
+
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    actor = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001").joints[0][:61]
+    base = pipe("two people bow to each other", num_people=3, actor=actor, seed=1)[0]
+    move = RigidTransform(yaw=1.1, origin=(-4.0, 0.0, 2.5))  # x' = R (x - origin)
+    moved_actor = move.apply(torch.from_numpy(actor)).numpy()
+    moved = pipe("two people bow to each other", num_people=3, actor=moved_actor, seed=1)[0]
+    expect = move.apply(torch.from_numpy(base.joints)).numpy()
+    assert np.abs(moved.joints - expect).max() < 1e-3
+    assert np.allclose(moved.joints[0], moved_actor[:60], atol=1e-6)
+    # features follow the joints: positions slot = joints, velocities = differences
+    assert np.allclose(moved.features[..., :66].reshape(3, 60, 22, 3), moved.joints, atol=1e-6)
+    vel = moved.features[:, :-1, 66:132].reshape(3, 59, 22, 3)
+    assert np.abs(vel[0] - np.diff(moved.joints[0], axis=0)).max() < 1e-5
+
+
+def test_ten_people(trained):
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    s = pipe("ten people gather around a caller", num_people=10, seconds=1.0, seed=0)[0]
+    assert s.joints.shape == (10, 30, 22, 3) and np.isfinite(s.joints).all()
+    assert s.meta["nfe"] == 6 + 9 * 3
+    with pytest.raises(UMFError, match="people"):
+        pipe("hi", num_people=17)
+
+
+def _umf(*args: str):
+    import subprocess
+    import sys
+
+    return subprocess.run([sys.executable, "-m", "umf.cli.main", *args],
+                          capture_output=True, text=True)  # fmt: skip
+
+
+def test_react_cli_with_a_bvh_actor(trained, tmp_path):
+    """`umf react`: a real Bandai BVH (centimetres) as person 1, two people generated."""
+    _, model, _ = trained
+    bvh = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh"
+    out = tmp_path / "react"
+    r = _umf("react", "two people bow to each other", "--actor", str(bvh), "--people", "3",
+             "--seconds", "2", "--format", "npz,glb", "--out", str(out),
+             "--model", str(model))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    npz = out / "react-two-people-bow-to-each-other.npz"
+    assert f"wrote {npz}" in r.stdout and npz.with_suffix(".glb").exists()
+    from umf.data.motion_file import load_motion
+
+    actor = load_motion(bvh).joints[0]
+    with np.load(npz) as z:
+        assert z["joints"].shape == (3, 60, 22, 3)
+        assert np.allclose(z["joints"][0], actor[:60], atol=1e-5)  # the user's own frame
+
+
+def test_generate_batch_and_prompt_file(trained, tmp_path):
+    _, model, _ = trained
+    prompts = tmp_path / "prompts.txt"
+    prompts.write_text("two people bow to each other\n\n# a comment\na person waves\n")
+    out = tmp_path / "gen"
+    r = _umf("generate", "--prompts", str(prompts), "--batch", "2", "--people", "2",
+             "--seconds", "1", "--format", "npz", "--out", str(out),
+             "--model", str(model))  # fmt: skip
+    assert r.returncode == 0, r.stderr
+    names = sorted(p.name for p in out.iterdir())
+    bow = "00-two-people-bow-to-each-other"
+    assert names == [f"{bow}-0.npz", f"{bow}-1.npz",
+                     "01-a-person-waves-0.npz", "01-a-person-waves-1.npz"]  # fmt: skip
+    with np.load(out / names[0]) as a, np.load(out / names[1]) as b:
+        assert not np.array_equal(a["joints"], b["joints"])  # two samples, not one twice
+
+
+@pytest.mark.parametrize(
+    ("args", "needle"),
+    [
+        (["generate", "x", "--people", "0"], "people"),
+        (["generate", "x", "--people", "17"], "people"),
+        (["generate", " "], "empty"),
+        (["generate", "x", "--seconds", "60"], "seconds"),
+        (["generate", "x", "--batch", "0"], "batch"),
+        (["generate", "x", "--steps", "a,b"], "steps"),
+        (["react", "x", "--actor", "missing.bvh"], "not found"),
+        (["react", "x", "--actor", "BAD.bvh"], "BAD.bvh"),
+        (["react", "x", "--actor", "BAD.npz"], "BAD.npz"),
+        (["react", "", "--actor", "BAD.npz"], "empty"),
+        (["react", "x", "--actor", "GOOD.npz", "--people", "1"], "at least 2"),
+        (["react", "x", "--actor", "GOOD.npz", "--actor-person", "2"], "no person 2"),
+    ],
+)
+def test_bad_input_is_one_line_and_writes_nothing(trained, tmp_path, args, needle):
+    _, model, _ = trained
+    (tmp_path / "BAD.bvh").write_text("HIERARCHY\nROOT x {\n")
+    (tmp_path / "BAD.npz").write_bytes(b"not a zip")
+    np.savez(tmp_path / "GOOD.npz", joints=np.zeros((40, 22, 3)) + np.linspace(0, 1.7, 22)[:, None])
+    args = [str(tmp_path / a) if a.endswith((".bvh", ".npz")) else a for a in args]
+    r = _umf(*args, "--model", str(model), "--out", str(tmp_path / "out"))
+    assert r.returncode == 1, r.stdout
+    assert len(r.stderr.strip().splitlines()) == 1 and needle in r.stderr, r.stderr
+    assert not (tmp_path / "out").exists()
+
+
+def test_missing_or_corrupt_model_from_the_cli(trained, tmp_path):
+    import shutil
+
+    _, model, _ = trained
+    r = _umf("generate", "x", "--model", str(tmp_path / "none"), "--out", str(tmp_path / "o"))
+    assert r.returncode == 1 and "model not found" in r.stderr
+    bad = tmp_path / "bad"
+    shutil.copytree(model, bad)
+    (bad / "vae.safetensors").write_bytes(b"\x00" * 10)
+    r = _umf("generate", "x", "--model", str(bad), "--out", str(tmp_path / "o"))
+    assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
+    assert not (tmp_path / "o").exists()

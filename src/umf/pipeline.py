@@ -24,7 +24,14 @@ import torch
 from umf import __version__
 from umf.config import UMFConfig
 from umf.errors import UMFError
-from umf.representation import Normalizer, features_to_joints
+from umf.representation import (
+    Normalizer,
+    RigidTransform,
+    canonical_transform,
+    features_to_joints,
+    joints_to_features,
+    transform_features,
+)
 
 MAX_PEOPLE = 16
 
@@ -91,6 +98,14 @@ class Scene:
                              self.fps)  # fmt: skip
             out.append(path)
         return out
+
+    def save_glb(self, path: str | Path) -> Path:
+        """The whole scene as one glTF binary: a skinned, animated skeleton per person,
+        posed by the same inverse kinematics as :meth:`save_bvh`; written atomically."""
+        from umf.exports.gltf import write_glb
+
+        extras = {"seed": self.seed, "model": self.model}
+        return write_glb(path, self.joints, self.fps, text=self.text, extras=extras)
 
     def render(self, path: str | Path, **kwargs: Any) -> Path:
         from umf.render import render_animation
@@ -199,7 +214,14 @@ class UMFPipeline:
         sflow_steps: int | None = None,
         actor: np.ndarray | None = None,
     ) -> list[Scene]:
-        """Generate one scene per prompt (batched). ``actor`` (T, 22, 3) fixes person 1."""
+        """Generate one scene per prompt (batched).
+
+        ``actor`` (T, 22, 3) joints in metres at the model's fps, in any frame, fixes
+        person 1 (the paper's action-reaction task): it is moved into the canonical frame
+        the model was trained in, the others are generated around it, and the whole scene
+        is moved back, so person 1 is the user's motion exactly and everyone else stands
+        in the user's own coordinates.
+        """
         prompts = [prompts] if isinstance(prompts, str) else list(prompts)
         if not prompts or any(not p.strip() for p in prompts):
             raise UMFError("the prompt is empty")
@@ -211,9 +233,11 @@ class UMFPipeline:
         text = self.text_encoder.encode(prompts).to(self.device)
         uncond = self.text_encoder.encode([""] * b).to(self.device)
         nfe = 0
+        frame = None
         if actor is not None:
-            t = actor.shape[0] - 1  # T joint frames are T - 1 feature frames
-            latents = [self._encode_actor(actor, b)]
+            actor_t, frame = self._canonical_actor(actor)
+            t = actor_t.shape[0] - 1  # T joint frames are T - 1 feature frames
+            latents = [self._encode_actor(actor_t, b)]
         else:
             t = self._frames(seconds)
             dataset = torch.full((b,), 1 if num_people > 1 else 0, dtype=torch.long)
@@ -242,9 +266,10 @@ class UMFPipeline:
             nfe += n
         z = torch.stack(latents, dim=1)  # (B, N, p, r)
         feats = self.decode(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
+        if frame is not None:  # back into the user's frame; person 1 is their motion exactly
+            feats = transform_features(feats.cpu(), frame, inverse=True)
+            feats[:, 0] = joints_to_features(torch.from_numpy(actor).float())
         joints = features_to_joints(feats)
-        if actor is not None:  # person 1 is the user's motion, exactly
-            joints[:, 0] = torch.from_numpy(actor[: joints.shape[2]]).to(joints)
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people}
         return [
             Scene(
@@ -264,17 +289,26 @@ class UMFPipeline:
         mask = torch.ones(z.shape[0], num_frames, dtype=torch.bool, device=z.device)
         return self.normalizer.denormalize(self.vae.decode(z, mask))
 
-    def _encode_actor(self, actor: np.ndarray, batch: int) -> torch.Tensor:
-        from umf.representation import joints_to_features
-
+    def _canonical_actor(self, actor: np.ndarray) -> tuple[torch.Tensor, RigidTransform]:
+        """The actor (T, 22, 3) in its canonical frame, and the map into that frame."""
         if actor.ndim != 3 or actor.shape[1:] != (22, 3):
             raise UMFError(f"the actor motion must be (T, 22, 3) joints, got {actor.shape}")
-        if not 16 <= actor.shape[0] <= self.config.vae.max_frames + 1:
+        most = self.config.vae.max_frames + 1
+        if not 16 <= actor.shape[0] <= most:
             raise UMFError(
-                f"the actor motion must have 16..{self.config.vae.max_frames + 1} frames, "
+                f"the actor motion must have 16..{most} frames "
+                f"({16 / self.config.fps:.1f}-{most / self.config.fps:.1f} s), "
                 f"got {actor.shape[0]}"
             )
-        f = joints_to_features(torch.from_numpy(np.ascontiguousarray(actor, dtype=np.float32)))
+        if not np.isfinite(actor).all():
+            raise UMFError("the actor motion contains NaN or infinite values")
+        joints = torch.from_numpy(np.ascontiguousarray(actor, dtype=np.float32))
+        frame = canonical_transform(joints)
+        return frame.apply(joints), frame
+
+    def _encode_actor(self, actor: torch.Tensor, batch: int) -> torch.Tensor:
+        """Latent (batch, p, r) of canonical actor joints (T, 22, 3): the posterior mean."""
+        f = joints_to_features(actor)
         x = self.normalizer.normalize(f)[None].to(self.device)
         mask = torch.ones(1, x.shape[1], dtype=torch.bool, device=self.device)
         mu, _ = self.vae.encode(x, mask)

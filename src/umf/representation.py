@@ -83,13 +83,13 @@ class RigidTransform:
     origin: tuple[float, float, float]
 
     def apply(self, joints: Tensor) -> Tensor:
-        rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype))
-        origin = torch.tensor(self.origin, dtype=joints.dtype)
+        rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype)).to(joints.device)
+        origin = torch.tensor(self.origin, dtype=joints.dtype, device=joints.device)
         return (joints - origin) @ rot.T
 
     def invert(self, joints: Tensor) -> Tensor:
-        rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype))
-        origin = torch.tensor(self.origin, dtype=joints.dtype)
+        rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype)).to(joints.device)
+        origin = torch.tensor(self.origin, dtype=joints.dtype, device=joints.device)
         return joints @ rot + origin
 
 
@@ -150,6 +150,24 @@ def assemble_features(joints: Tensor, rot6d: Tensor) -> Tensor:
     vel = (joints[1:] - joints[:-1]).reshape(t, 66)
     rot = rot6d[:-1].reshape(t, 126).to(joints.dtype)
     return torch.cat([pos, vel, rot, foot_contacts(joints)], dim=-1)
+
+
+def transform_features(features: Tensor, tf: RigidTransform, inverse: bool = False) -> Tensor:
+    """Move features (..., T, 262) rigidly: into ``tf``'s frame, or back out with ``inverse``.
+
+    Positions move as points, velocities turn as vectors; local rotations of joints 1..21
+    and foot contacts do not change under a turn about +Y and a shift.
+    """
+    lead = features.shape[:-1]
+    pos = features[..., POS].reshape(*lead, NUM_JOINTS, 3)
+    vel = features[..., VEL].reshape(*lead, NUM_JOINTS, 3)
+    rot = yaw_matrix(torch.tensor(tf.yaw, dtype=features.dtype)).to(features.device)
+    if inverse:
+        pos, vel = tf.invert(pos), vel @ rot
+    else:
+        pos, vel = tf.apply(pos), vel @ rot.T
+    rest = features[..., VEL.stop :]
+    return torch.cat([pos.reshape(*lead, 66), vel.reshape(*lead, 66), rest], dim=-1)
 
 
 def mirror_rot6d(rot6d: Tensor) -> Tensor:

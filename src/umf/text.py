@@ -4,7 +4,8 @@ The frozen encoder (all-MiniLM-L6-v2 by default, CLIP from a local directory to 
 paper) turns prompts into token states once; ``TextFeatureCache`` memoises them so training
 never re-runs the frozen tower; ``TextHead`` is the small trainable transformer that turns the
 token states into the single condition token P-Flow / S-Flow consume. Everything loads from
-local files: no network, ever. ``transformers`` is imported lazily (it is a ``train`` extra).
+local files: no network, ever. ``transformers`` is imported lazily (sampling and training
+need it, reading data does not).
 """
 
 from __future__ import annotations

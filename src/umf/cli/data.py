@@ -79,35 +79,11 @@ def info(corpus: Path = typer.Argument(..., help="A prepared corpus directory.")
 def load_item(item: str, corpus: Path | None) -> tuple[np.ndarray, str]:
     """Joints (P, T, 22, 3) and a caption from a corpus id, an .npz scene or a .bvh file."""
     path = Path(item)
-    if path.suffix in (".npz", ".bvh"):
-        if not path.exists():
-            raise UMFError(f"file not found: {path}")
-        if path.suffix == ".npz":
-            try:
-                with np.load(path, allow_pickle=False) as z:
-                    joints = np.asarray(z["joints"], dtype=np.float32)
-                    text = str(z["text"]) if "text" in z else path.stem
-            except (OSError, ValueError, KeyError) as exc:
-                raise UMFError(f"{path}: not a umf scene file ({exc})") from exc
-            if joints.ndim == 3:
-                joints = joints[None]
-            if joints.ndim != 4 or joints.shape[-2:] != (22, 3):
-                raise UMFError(f"{path}: joints must be (P, T, 22, 3), got {joints.shape}")
-            return joints, text
-        from umf.data.bvh import forward_kinematics, read_bvh
+    if path.suffix.lower() in (".npz", ".bvh"):
+        from umf.data.motion_file import load_motion
 
-        bvh = read_bvh(path)
-        pos, _ = forward_kinematics(bvh)
-        pos = np.asarray(pos, dtype=np.float32)
-        if pos.shape[1] != 22:
-            from umf.data.bandai import retarget_to_smpl22
-
-            try:
-                return retarget_to_smpl22(pos, bvh.names)[None], path.stem
-            except KeyError as exc:
-                raise UMFError(f"{path}: neither SMPL-22 nor a Bandai skeleton") from exc
-        scale = 0.01 if np.abs(pos).max() > 20 else 1.0  # centimetre files
-        return pos[None] * scale, path.stem
+        motion = load_motion(path)
+        return motion.joints, motion.text or path.stem
     if corpus is None:
         raise UMFError(f"{item!r} is not a file; give --corpus to look it up in a corpus")
     from umf.data.corpus import Corpus

@@ -1,0 +1,1 @@
+"""Evaluation: metrics, physics, relation accuracy and the per-person-index study."""

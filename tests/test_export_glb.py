@@ -1,0 +1,288 @@
+"""GLB export, read back independently: pygltflib parses the file, numpy decodes the
+accessors, scipy's quaternions (x, y, z, w like glTF) drive a forward kinematics written
+here, and the Khronos glTF-Validator checks the file when node and the npm package exist."""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import subprocess
+from pathlib import Path
+
+import numpy as np
+import pygltflib
+import pytest
+from scipy.spatial.transform import Rotation
+
+from umf.errors import UMFError
+from umf.exports.gltf import write_glb
+from umf.pipeline import Scene
+from umf.skeleton import JOINT_NAMES
+
+REPO = Path(__file__).resolve().parents[1]
+VALIDATOR_ENV = "UMF_GLTF_VALIDATOR"
+DEFAULT_VALIDATOR = REPO / ".venv" / "node" / "node_modules" / "gltf-validator"
+FPS = 30.0
+
+_DTYPES = {5120: np.int8, 5121: np.uint8, 5122: np.int16, 5123: np.uint16, 5125: np.uint32,
+           5126: np.float32}  # fmt: skip
+_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+
+
+# ----------------------------------------------------------------- an independent reader
+def accessor(gltf: pygltflib.GLTF2, index: int) -> np.ndarray:
+    """Accessor ``index`` as (count, width) numpy, honouring offsets and byteStride."""
+    acc = gltf.accessors[index]
+    view = gltf.bufferViews[acc.bufferView]
+    dtype = np.dtype(_DTYPES[acc.componentType]).newbyteorder("<")
+    width = _WIDTH[acc.type]
+    start = (view.byteOffset or 0) + (acc.byteOffset or 0)
+    stride = view.byteStride or dtype.itemsize * width
+    blob = gltf.binary_blob()
+    rows = [np.frombuffer(blob, dtype, width, start + k * stride) for k in range(acc.count)]
+    return np.array(rows).reshape(acc.count, width)
+
+
+def node_parents(gltf: pygltflib.GLTF2) -> dict[int, int]:
+    return {c: p for p, node in enumerate(gltf.nodes) for c in node.children or []}
+
+
+def world_matrices(gltf: pygltflib.GLTF2, animate: bool = True) -> np.ndarray:
+    """(T, nodes, 4, 4) world matrices of every node at every key of animation 0, or
+    (1, nodes, 4, 4) of the rest pose (the nodes' own transforms) without ``animate``."""
+    anim = gltf.animations[0]
+    times = accessor(gltf, anim.samplers[0].input)[:, 0] if animate else np.zeros(1)
+    num_frames, num_nodes = len(times), len(gltf.nodes)
+    trans = np.zeros((num_frames, num_nodes, 3))
+    quat = np.zeros((num_frames, num_nodes, 4))
+    quat[..., 3] = 1.0
+    for n, node in enumerate(gltf.nodes):
+        assert node.matrix is None and node.scale is None
+        if node.translation is not None:
+            trans[:, n] = node.translation
+        if node.rotation is not None:
+            quat[:, n] = node.rotation
+    for channel in anim.channels if animate else []:
+        sampler = anim.samplers[channel.sampler]
+        assert np.array_equal(accessor(gltf, sampler.input)[:, 0], times)
+        values = accessor(gltf, sampler.output)
+        target = channel.target
+        if target.path == "translation":
+            trans[:, target.node] = values
+        else:
+            assert target.path == "rotation"
+            quat[:, target.node] = values
+    local = np.tile(np.eye(4), (num_frames, num_nodes, 1, 1))
+    local[..., :3, :3] = (
+        Rotation.from_quat(quat.reshape(-1, 4)).as_matrix().reshape(num_frames, num_nodes, 3, 3)
+    )
+    local[..., :3, 3] = trans
+    parents = node_parents(gltf)
+    world = np.zeros_like(local)
+    done: set[int] = set()
+
+    def visit(n: int) -> None:
+        if n in done:
+            return
+        if n in parents:
+            visit(parents[n])
+            world[:, n] = world[:, parents[n]] @ local[:, n]
+        else:
+            world[:, n] = local[:, n]
+        done.add(n)
+
+    for n in range(num_nodes):
+        visit(n)
+    return world
+
+
+def skin_joint_positions(gltf: pygltflib.GLTF2) -> np.ndarray:
+    """(N, T, 22, 3) world positions of every skin's joints at every key."""
+    world = world_matrices(gltf)
+    return np.stack([world[:, skin.joints][..., :3, 3] for skin in gltf.skins])
+
+
+# ----------------------------------------------------------------- real scenes
+def _yaw(joints: np.ndarray, degrees: float) -> np.ndarray:
+    return joints @ Rotation.from_euler("y", degrees, degrees=True).as_matrix().T
+
+
+def real_scene(real_joints, bandai_clips, people: int) -> np.ndarray:
+    """(people, 100, 22, 3): a real walk and other real clips, metres apart, turned."""
+    clips = {c.id: c.joints[0] for c in bandai_clips}
+    motions = [
+        real_joints.numpy()[:100],
+        _yaw(clips["dataset-1_kick_normal_001"][:100], 90.0) + np.array([6.0, 0.0, 0.0]),
+        _yaw(clips["dataset-2_wave-right-hand_normal_001"][:100], -135.0)
+        + np.array([-5.0, 0.0, 8.0]),
+    ]
+    return np.stack(motions[:people])
+
+
+@pytest.fixture(scope="module")
+def scene3(real_joints, bandai_clips) -> Scene:
+    joints = real_scene(real_joints, bandai_clips, 3).astype(np.float32)
+    return Scene(joints, np.zeros((3, 100, 262), np.float32), "three people: walk, kick, wave",
+                 FPS, seed=7, model="test-model")  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def glb3(scene3, tmp_path_factory) -> Path:
+    return scene3.save_glb(tmp_path_factory.mktemp("glb") / "three.glb")
+
+
+@pytest.mark.parametrize("people", [2, 3])
+def test_forward_kinematics_reproduces_real_joints(real_joints, bandai_clips, tmp_path, people):
+    joints = real_scene(real_joints, bandai_clips, people)
+    path = write_glb(tmp_path / "scene.glb", joints, FPS, text="people far apart")
+    gltf = pygltflib.GLTF2().load_binary(path)
+    got = skin_joint_positions(gltf)
+    assert got.shape == joints.shape
+    err = np.linalg.norm(got - joints, axis=-1)
+    assert err.max() < 1e-3, err.max()  # float32 storage: about 1e-6 m
+
+
+def test_structure(glb3, scene3):
+    gltf = pygltflib.GLTF2().load_binary(glb3)
+    n, t = scene3.num_people, scene3.num_frames
+    assert gltf.asset.version == "2.0"
+    assert gltf.asset.generator.startswith("umf ")
+    assert gltf.asset.extras["text"] == scene3.text
+    assert gltf.asset.extras["seed"] == 7 and gltf.asset.extras["people"] == [
+        f"person{i + 1}" for i in range(n)
+    ]
+    assert len(gltf.skins) == len(gltf.meshes) == n == 3
+    for i, skin in enumerate(gltf.skins):
+        names = [gltf.nodes[j].name for j in skin.joints]
+        assert names == [f"person{i + 1}_{name}" for name in JOINT_NAMES]
+        assert gltf.nodes[skin.skeleton].name == f"person{i + 1}"
+    roots = set(gltf.scenes[gltf.scene].nodes)
+    assert {gltf.nodes[r].name for r in roots} == {
+        f"person{i + 1}{suffix}" for i in range(n) for suffix in ("", "_body")
+    }
+    assert set(node_parents(gltf)).isdisjoint(roots)
+    assert len(gltf.animations) == 1
+    anim = gltf.animations[0]
+    assert len(anim.channels) == n * 23  # pelvis translation + 22 rotations per person
+    assert {s.interpolation for s in anim.samplers} == {"LINEAR"}
+    time_acc = gltf.accessors[anim.samplers[0].input]
+    times = accessor(gltf, anim.samplers[0].input)[:, 0]
+    np.testing.assert_allclose(times, np.arange(t) / FPS, rtol=0, atol=1e-6)
+    assert time_acc.min == [float(times[0])] and time_acc.max == [float(times[-1])]
+    for sampler in anim.samplers:
+        out = accessor(gltf, sampler.output)
+        assert len(out) == t
+        if out.shape[1] == 4:  # unit quaternions, consecutive keys in one hemisphere
+            np.testing.assert_allclose(np.linalg.norm(out, axis=1), 1.0, atol=1e-6)
+            assert (np.sum(out[1:] * out[:-1], axis=1) >= 0).all()
+    colours = {tuple(m.pbrMetallicRoughness.baseColorFactor) for m in gltf.materials}
+    assert len(colours) == n
+
+
+def test_skin_follows_the_skeleton(glb3, scene3):
+    """Inverse bind matrices undo the rest pose, so the skinned body stays on its own
+    person's joints at every frame (a wrong or missing bind matrix moves it metres away)."""
+    gltf = pygltflib.GLTF2().load_binary(glb3)
+    world = world_matrices(gltf)
+    rest = world_matrices(gltf, animate=False)[0]
+    for i, skin in enumerate(gltf.skins):
+        ibm = accessor(gltf, skin.inverseBindMatrices).reshape(-1, 4, 4).transpose(0, 2, 1)
+        np.testing.assert_allclose(ibm @ rest[skin.joints], np.tile(np.eye(4), (22, 1, 1)),
+                                   atol=1e-6)  # fmt: skip
+        node = next(nd for nd in gltf.nodes if nd.skin == i)
+        prim = gltf.meshes[node.mesh].primitives[0]
+        pos = accessor(gltf, prim.attributes.POSITION)
+        acc = gltf.accessors[prim.attributes.POSITION]
+        np.testing.assert_array_equal(acc.min, pos.min(0))
+        np.testing.assert_array_equal(acc.max, pos.max(0))
+        tri = accessor(gltf, prim.indices)[:, 0].reshape(-1, 3)
+        a, b, c = pos[tri[:, 0]], pos[tri[:, 1]], pos[tri[:, 2]]
+        facing = np.einsum(
+            "ij,ij->i", np.cross(b - a, c - a), accessor(gltf, prim.attributes.NORMAL)[tri[:, 0]]
+        )
+        assert (facing > 0).all()  # counter-clockwise seen from outside: front faces
+        joints = accessor(gltf, prim.attributes.JOINTS_0)
+        weights = accessor(gltf, prim.attributes.WEIGHTS_0)
+        np.testing.assert_allclose(weights.sum(1), 1.0)
+        skin_mats = world[:, skin.joints] @ ibm  # (T, 22, 4, 4)
+        homog = np.concatenate([pos, np.ones((len(pos), 1))], axis=1)
+        blend = np.einsum("vk,tvkab->tvab", weights, skin_mats[:, joints])
+        verts = np.einsum("tvab,vb->tva", blend, homog)[..., :3]
+        target = scene3.joints[i]  # (T, 22, 3)
+        nearest = np.linalg.norm(verts[:, :, None] - target[:, None], axis=-1).min(-1)
+        assert nearest.max() < 0.25, nearest.max()
+
+
+def _validator_package() -> Path | None:
+    """The gltf-validator npm package: $UMF_GLTF_VALIDATOR (the package folder or an npm
+    prefix holding node_modules/gltf-validator), else .venv/node from the Makefile."""
+    root = Path(os.environ.get(VALIDATOR_ENV, DEFAULT_VALIDATOR))
+    for candidate in (root, root / "node_modules" / "gltf-validator"):
+        manifest = candidate / "package.json"
+        if manifest.is_file() and json.loads(manifest.read_text()).get("name") == "gltf-validator":
+            return candidate
+    return None
+
+
+_VALIDATE_JS = """
+const fs = require("fs");
+const validator = require(process.argv[2]);
+validator.validateBytes(new Uint8Array(fs.readFileSync(process.argv[3])), {maxIssues: 0})
+  .then((report) => console.log(JSON.stringify(report)))
+  .catch((error) => { console.error(String(error)); process.exit(2); });
+"""
+
+
+def test_khronos_validator(glb3, tmp_path):
+    node = shutil.which("node")
+    package = _validator_package()
+    if node is None or package is None:
+        pytest.skip(
+            f"Khronos glTF-Validator not available (node: {node}, package: {package}); "
+            f"install it with `npm install --prefix .venv/node gltf-validator` "
+            f"or point {VALIDATOR_ENV} at it"
+        )
+    script = tmp_path / "validate.js"
+    script.write_text(_VALIDATE_JS)
+    run = subprocess.run(
+        [node, str(script), str(package.resolve()), str(glb3)],
+        capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    assert run.returncode == 0, run.stderr
+    report = json.loads(run.stdout)
+    issues = report["issues"]
+    summary = [(m["code"], m["severity"], m.get("pointer")) for m in issues["messages"]]
+    print(f"gltf-validator {report['validatorVersion']}: {issues['numErrors']} errors, "
+          f"{issues['numWarnings']} warnings, {issues['numInfos']} infos")  # fmt: skip
+    assert issues["numErrors"] == 0, summary
+    assert issues["numWarnings"] == 0, summary
+    assert report["info"]["animationCount"] == 1 and report["info"]["hasSkins"]
+
+
+def test_failed_write_leaves_no_file(real_joints, tmp_path, monkeypatch):
+    joints = real_joints.numpy()[None, :40]
+    dest = tmp_path / "out.glb"
+
+    def half_then_fail(self):
+        return [b"glTF", b"\x02\x00\x00\x00", None]  # writing None raises mid-file
+
+    monkeypatch.setattr(pygltflib.GLTF2, "save_to_bytes", half_then_fail)
+    with pytest.raises(TypeError):
+        write_glb(dest, joints, FPS)
+    assert list(tmp_path.iterdir()) == []
+    dest.write_bytes(b"old")
+    with pytest.raises(TypeError):
+        write_glb(dest, joints, FPS)
+    assert dest.read_bytes() == b"old" and list(tmp_path.iterdir()) == [dest]
+
+
+@pytest.mark.parametrize(
+    ("shape", "fps", "names"),
+    [((2, 10, 21, 3), 30.0, None), ((0, 10, 22, 3), 30.0, None), ((1, 10, 22, 3), 0.0, None),
+     ((2, 10, 22, 3), 30.0, ["a", "a"]), ((2, 10, 22, 3), 30.0, ["a"])],
+)  # fmt: skip
+def test_bad_inputs_are_one_line_errors(tmp_path, shape, fps, names):
+    with pytest.raises(UMFError):
+        write_glb(tmp_path / "bad.glb", np.zeros(shape), fps, names=names)
+    assert not (tmp_path / "bad.glb").exists()

@@ -1,0 +1,94 @@
+"""Reading a user's motion file (what `umf react --actor` takes): units, frame rates, errors."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import BANDAI_FIXTURE
+from umf.data.bvh import write_smpl22_bvh
+from umf.data.motion_file import guess_unit, load_motion
+from umf.errors import UMFError
+from umf.skeleton import fit_offsets, inverse_kinematics
+
+BOW = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh"
+
+
+def _write(path, joints: np.ndarray, scale: float, fps: float) -> None:
+    """SMPL-22 BVH of metre joints, written in units of ``scale`` metres."""
+    j = torch.from_numpy(joints).double()
+    offsets = fit_offsets(j)
+    local = inverse_kinematics(j, offsets)
+    write_smpl22_bvh(path, local.numpy(), j[:, 0].numpy() / scale, offsets.numpy() / scale, fps)
+
+
+@pytest.mark.parametrize("unit", [1.0, 0.01, 0.001, 0.0254])
+def test_units_are_recognised(real_joints, unit):
+    joints = real_joints.numpy()
+    assert guess_unit(joints / unit) == unit
+
+
+@pytest.mark.parametrize("unit", [1.0, 0.01, 0.0254])
+def test_smpl22_bvh_in_any_unit_reads_back_in_metres(real_joints, tmp_path, unit):
+    joints = real_joints.numpy()[:60].astype(np.float32)
+    _write(tmp_path / "a.bvh", joints, unit, 30.0)
+    m = load_motion(tmp_path / "a.bvh")
+    assert m.joints.shape == (1, 60, 22, 3)
+    assert np.abs(m.joints[0] - joints).max() < 1e-4
+
+
+def test_frame_rate_is_resampled_to_30(real_joints, tmp_path):
+    joints = real_joints.numpy()[:61].astype(np.float32)
+    _write(tmp_path / "a.bvh", joints, 1.0, 60.0)  # the same frames, played twice as fast
+    m = load_motion(tmp_path / "a.bvh")
+    assert m.source_fps == pytest.approx(60.0)
+    assert m.joints.shape[1] == 31  # 1 s at 60 fps = 1 s at 30 fps
+    assert np.abs(m.joints[0] - joints[::2]).max() < 1e-4
+
+
+def test_bandai_bvh_in_centimetres(bandai_clips):
+    m = load_motion(BOW)
+    clip = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001")
+    assert np.abs(m.joints - clip.joints).max() < 1e-5  # same as the corpus adapter
+    height = m.joints[0, 0, :, 1].max() - m.joints[0, 0, :, 1].min()
+    assert 1.4 < height < 2.0
+
+
+def test_npz_scenes_and_bare_joints(real_joints, tmp_path):
+    joints = real_joints.numpy()[:40].astype(np.float32)
+    np.savez(tmp_path / "one.npz", joints=joints)
+    np.savez(tmp_path / "two.npz", joints=np.stack([joints, joints + 1]), text=np.array("hi"))
+    assert load_motion(tmp_path / "one.npz").joints.shape == (1, 40, 22, 3)
+    two = load_motion(tmp_path / "two.npz")
+    assert two.joints.shape == (2, 40, 22, 3) and two.text == "hi"
+
+
+@pytest.mark.parametrize(
+    ("name", "content", "needle"),
+    [
+        ("x.fbx", b"", "unsupported"),
+        ("x.npz", b"garbage", "not a readable"),
+        ("x.bvh", b"HIERARCHY\nROOT a {\n", "x.bvh"),
+    ],
+)
+def test_bad_files_are_one_clear_error(tmp_path, name, content, needle):
+    (tmp_path / name).write_bytes(content)
+    with pytest.raises(UMFError, match=needle):
+        load_motion(tmp_path / name)
+
+
+def test_bad_arrays(tmp_path):
+    np.savez(tmp_path / "shape.npz", joints=np.zeros((10, 21, 3)))
+    with pytest.raises(UMFError, match="22, 3"):
+        load_motion(tmp_path / "shape.npz")
+    bad = np.ones((10, 22, 3)) * np.linspace(0, 1.7, 22)[:, None]
+    bad[3, 4, 1] = np.nan
+    np.savez(tmp_path / "nan.npz", joints=bad)
+    with pytest.raises(UMFError, match="NaN"):
+        load_motion(tmp_path / "nan.npz")
+    np.savez(tmp_path / "none.npz", other=np.zeros(3))
+    with pytest.raises(UMFError, match="joints"):
+        load_motion(tmp_path / "none.npz")
+    with pytest.raises(UMFError, match="not found"):
+        load_motion(tmp_path / "missing.bvh")
