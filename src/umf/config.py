@@ -101,6 +101,31 @@ class TextConfig:
 
 
 @dataclass
+class EvaluatorConfig:
+    """Contrastive text-motion evaluator, InterGen's InterCLIP architecture (SPEC 8)."""
+
+    d_model: int = 1024  # motion transformer
+    num_layers: int = 8
+    num_heads: int = 8
+    ff_dim: int = 2048
+    dropout: float = 0.1
+    embed_dim: int = 512
+    text_width: int = 768  # text transformer
+    text_layers: int = 8
+    text_heads: int = 8
+    text_ff_dim: int = 2048
+    # "minilm" / "clip": frozen token states; "clip-tokens": CLIP token ids (InterGen layout)
+    text_encoder: str = "minilm"
+    text_path: str | None = None  # local CLIP directory ("clip", "clip-tokens")
+    text_max_length: int = 77
+    latent_scale_init: float = 1.0  # embeddings have this norm; logits = scale^2 * cosine
+    max_frames: int = 300  # longest motion scored (InterHuman's limit)
+    # consecutive frames concatenated into one motion token; 1 = InterCLIP exactly, more is
+    # our cheaper variant for CPUs (attention cost falls with its square)
+    frames_per_token: int = 1
+
+
+@dataclass
 class TrainConfig:
     """Optimisation of one stage (AdamW + cosine, paper Sec. 5.1)."""
 
@@ -135,6 +160,10 @@ class UMFConfig:
     train_vae: TrainConfig = field(default_factory=lambda: TrainConfig(batch_size=128))
     train_pflow: TrainConfig = field(default_factory=TrainConfig)
     train_sflow: TrainConfig = field(default_factory=TrainConfig)
+    evaluator: EvaluatorConfig = field(default_factory=EvaluatorConfig)
+    train_evaluator: TrainConfig = field(
+        default_factory=lambda: TrainConfig(batch_size=96, max_frames=300, val_every=2000)
+    )
 
     def to_dict(self) -> dict[str, Any]:
         return dataclasses.asdict(self)
@@ -229,6 +258,16 @@ def small_config() -> UMFConfig:
         lr=3e-4, batch_size=128, warmup_steps=200, min_frames=30, max_frames=120,
         val_every=250, ckpt_every=250, latent_passes=4,
     )  # fmt: skip
+    # evaluators: 4 frames per motion token, about 4 minutes each on this CPU (one thread)
+    evaluator = EvaluatorConfig(
+        d_model=128, num_layers=3, num_heads=4, ff_dim=256, embed_dim=128,
+        text_width=128, text_layers=2, text_heads=4, text_ff_dim=256,
+        latent_scale_init=3.0, frames_per_token=4,
+    )  # fmt: skip
+    train_evaluator = TrainConfig(
+        lr=1e-3, batch_size=64, max_steps=500, warmup_steps=40, min_frames=45,
+        max_frames=240, val_every=100, ckpt_every=100, log_every=25,
+    )  # fmt: skip
     return UMFConfig(
         family="small",
         vae=VAEConfig(
@@ -239,21 +278,24 @@ def small_config() -> UMFConfig:
             num_tokens=16,
             latent_dim=16,
             max_frames=300,
+            dropout=0.0,  # a VAE this small underfits; dropout only slowed it (measured)
         ),
         pflow=PFlowConfig(denoiser=den),
         sflow=SFlowConfig(denoiser=dataclasses.replace(den), context_ff_dim=128),
         train_vae=TrainConfig(
             lr=4e-4,
             batch_size=32,
-            max_steps=900,
+            max_steps=1400,
             warmup_steps=100,
             min_frames=30,
             max_frames=120,
-            val_every=150,
-            ckpt_every=150,
+            val_every=200,
+            ckpt_every=200,
         ),
         train_pflow=TrainConfig(max_steps=1500, **flow_train),
         train_sflow=TrainConfig(max_steps=1500, **flow_train),
+        evaluator=evaluator,
+        train_evaluator=train_evaluator,
     )
 
 

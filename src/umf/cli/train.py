@@ -1,4 +1,4 @@
-"""`umf train ...`: the three stages, all of them in order, and the model export."""
+"""`umf train ...`: the three stages, all of them in order, the model export, the evaluators."""
 
 from __future__ import annotations
 
@@ -86,6 +86,32 @@ def all_stages(
     _run(["vae", "pflow", "sflow"], corpus, out, family, config, set_, max_steps, launch, resume)
     path = export_model(out, out / "model", fp16=fp16)
     typer.echo(f"model written to {path}")
+
+
+@app.command("evaluator")
+def evaluator(
+    corpus: Path = CORPUS, out: Path = RUN, family: str | None = FAMILY,
+    config: Path | None = CONFIG, set_: list[str] = SET, max_steps: int | None = STEPS,
+    kind: list[str] = typer.Option(["interaction", "single"], help="interaction and/or single."),
+    accelerator: str = ACCEL, devices: str = DEVICES, num_nodes: int = NODES,
+    strategy: str = STRATEGY, precision: str = PRECISION, resume: bool = RESUME,
+    progress: bool = PROGRESS, tensorboard: bool = TB,
+) -> None:  # fmt: skip
+    """Train the contrastive text-motion evaluators (two-person and single) into RUN/evaluator."""
+    from umf.train.evaluator_stage import train_evaluators
+    from umf.train.run import resolve_config
+
+    launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard)
+    cfg = resolve_config(out, family, config, set_)
+    summaries = train_evaluators(corpus, out, cfg, launch, kinds=kind, resume=resume,
+                                 max_steps=max_steps, log=typer.echo)  # fmt: skip
+    for name, s in summaries.items():
+        val = s.get("val") or {}
+        tops = " / ".join(f"{val.get(f'r_precision_top{k}', float('nan')):.3f}" for k in (1, 2, 3))
+        typer.echo(
+            f"evaluator {name}: {s.get('steps')} steps in {s.get('seconds', 0):.0f} s; "
+            f"val R-precision top-1/2/3 {tops}; checkpoints in {out / 'evaluator' / name}"
+        )
 
 
 @app.command()
