@@ -217,6 +217,13 @@ def test_ten_people(trained):
     s = pipe("ten people gather around a caller", num_people=10, seconds=1.0, seed=0)[0]
     assert s.joints.shape == (10, 30, 22, 3) and np.isfinite(s.joints).all()
     assert s.meta["nfe"] == 6 + 9 * 3
+    from test_separation import _pelvis_gaps
+
+    assert min(_pelvis_gaps(s.joints)) >= 0.5 - 1e-4  # nobody on top of anybody
+    raw = pipe("ten people gather around a caller", num_people=10, seconds=1.0, seed=0,
+               separate=False)[0]  # fmt: skip
+    shifts = np.asarray(s.meta["shifts"])
+    assert np.allclose(s.joints, raw.joints + shifts[:, None, None, :], atol=1e-5)
     with pytest.raises(UMFError, match="people"):
         pipe("hi", num_people=17)
 

@@ -32,6 +32,7 @@ from umf.representation import (
     joints_to_features,
     transform_features,
 )
+from umf.separation import separate_people
 
 MAX_PEOPLE = 16
 
@@ -181,7 +182,7 @@ class UMFPipeline:
         if ck.normalizer is None:
             raise UMFError(f"{path}: missing normalizer.safetensors")
         pipe.normalizer = ck.normalizer
-        pipe.name = path.name
+        pipe.name = str(info.get("name") or path.name)
         for m in (pipe.vae, pipe.pflow, pipe.sflow):
             m.float().eval()
         return pipe
@@ -213,6 +214,7 @@ class UMFPipeline:
         pflow_steps: Sequence[int] | None = None,
         sflow_steps: int | None = None,
         actor: np.ndarray | None = None,
+        separate: bool = True,
     ) -> list[Scene]:
         """Generate one scene per prompt (batched).
 
@@ -221,6 +223,11 @@ class UMFPipeline:
         the model was trained in, the others are generated around it, and the whole scene
         is moved back, so person 1 is the user's motion exactly and everyone else stands
         in the user's own coordinates.
+
+        ``separate`` (default) shifts people 2..N rigidly on the floor where their pelvis
+        paths come closer than 0.5 m to someone generated before them
+        (:mod:`umf.separation`); the motions themselves are untouched and the shifts are
+        in ``scene.meta["shifts"]``. Evaluation turns it off to score the raw model.
         """
         prompts = [prompts] if isinstance(prompts, str) else list(prompts)
         if not prompts or any(not p.strip() for p in prompts):
@@ -269,6 +276,14 @@ class UMFPipeline:
         if frame is not None:  # back into the user's frame; person 1 is their motion exactly
             feats = transform_features(feats.cpu(), frame, inverse=True)
             feats[:, 0] = joints_to_features(torch.from_numpy(actor).float())
+        shifts = np.zeros((b, num_people, 3), dtype=np.float32)
+        if separate and num_people > 1:
+            feats = feats.cpu()
+            for i in range(b):
+                _, shift = separate_people(features_to_joints(feats[i]).numpy())
+                shifts[i] = shift
+            offset = torch.from_numpy(shifts).to(feats).repeat(1, 1, 22)  # (B, N, 66)
+            feats[..., :66] = feats[..., :66] + offset[:, :, None, :]
         joints = features_to_joints(feats)
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people}
         return [
@@ -279,7 +294,7 @@ class UMFPipeline:
                 self.config.fps,
                 seed,
                 self.name,
-                dict(meta),
+                {**meta, "shifts": shifts[i].tolist()},
             )
             for i in range(b)
         ]
