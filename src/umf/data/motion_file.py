@@ -18,7 +18,7 @@ from umf.errors import UMFError
 FPS = 30.0
 # Candidate units of a BVH file, in metres per unit.
 UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
-PERSON_HEIGHT = 1.7  # metres: the height a unit guess aims for
+PERSON_HEIGHT = 1.5  # metres: head-to-toe joint span of an adult, what a unit guess aims for
 
 
 @dataclass
@@ -71,12 +71,14 @@ def _load_npz(path: Path) -> tuple[np.ndarray, str, float]:
 def _load_bvh(path: Path) -> tuple[np.ndarray, float]:
     from umf.data.bandai import retarget_to_smpl22
     from umf.data.bvh import forward_kinematics, read_bvh
+    from umf.skeleton import JOINT_NAMES
 
     bvh = read_bvh(path)
     pos, _ = forward_kinematics(bvh)
     pos = np.asarray(pos, dtype=np.float64)
-    if pos.shape[1] == 22:
-        joints = pos
+    index = {n: i for i, n in enumerate(bvh.names)}
+    if all(n in index for n in JOINT_NAMES):  # SMPL-22 by name, whatever the file's order
+        joints = pos[:, [index[n] for n in JOINT_NAMES]]
     else:
         try:  # the Bandai skeleton; retarget_to_smpl22 also turns cm into m, undo that
             joints = retarget_to_smpl22(pos, bvh.names).astype(np.float64) * 100.0
