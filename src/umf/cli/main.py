@@ -8,6 +8,7 @@ import typer
 
 from umf import __version__
 from umf.cli.data import app as data_app
+from umf.cli.eval import evaluate
 from umf.cli.generate import generate, react
 from umf.cli.train import app as train_app
 from umf.errors import UMFError
@@ -23,6 +24,7 @@ app.add_typer(data_app, name="data")
 app.add_typer(train_app, name="train")
 app.command("generate")(generate)
 app.command("react")(react)
+app.command("eval")(evaluate)
 
 
 def _version(value: bool) -> None:

@@ -1,0 +1,184 @@
+"""`umf eval --quick` end to end on a tiny setup, and its one-line errors.
+
+The setup is real data with untrained weights: a corpus prepared from the bundled Bandai
+clips, a tiny randomly initialised UMF (plus a reaction-only variant) and a tiny randomly
+initialised evaluator, all saved in the formats `umf train` writes. Numbers of untrained
+models mean nothing; the test checks the report's structure and the real-data references.
+"""
+
+from __future__ import annotations
+
+import json
+import shutil
+import sys
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from conftest import BANDAI_FIXTURE, TINY_MODEL
+from umf.cli.main import app, run
+from umf.config import EvaluatorConfig, set_option, small_config
+from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+from umf.errors import UMFError
+from umf.eval import report as R
+from umf.eval.evaluator import MotionTextEvaluator, evaluator_config_dict
+from umf.pipeline import UMFPipeline
+from umf.train.checkpoint import save_checkpoint
+
+TINY_EVALUATOR = EvaluatorConfig(
+    d_model=16, num_layers=1, num_heads=2, ff_dim=32, dropout=0.0, embed_dim=8, text_width=16,
+    text_layers=1, text_heads=2, text_ff_dim=32, text_max_length=32, frames_per_token=4,
+)  # fmt: skip
+
+
+@pytest.fixture(autouse=True, scope="module")
+def one_thread():
+    """Tiny models: one thread avoids OpenMP spinning on a busy 2-core machine (100x here)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
+def save_tiny_model(path, normalizer, *options: str):
+    """A randomly initialised tiny UMF in the model-directory format."""
+    cfg = small_config()
+    for o in (*TINY_MODEL, *options):
+        cfg = set_option(cfg, o)
+    torch.manual_seed(0)
+    pipe = UMFPipeline.build(cfg)
+    modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
+    return save_checkpoint(path, modules, config=cfg.to_dict(), normalizer=normalizer)
+
+
+def save_tiny_evaluators(run_dir, normalizer):
+    """Random evaluators of both kinds where `umf train evaluator` puts them."""
+    for kind in ("interaction", "single"):
+        torch.manual_seed(1)
+        ev = MotionTextEvaluator(TINY_EVALUATOR, kind, text_dim=384)
+        ev.set_normalizer(normalizer)
+        save_checkpoint(run_dir / "evaluator" / kind / "best", {"evaluator": ev},
+                        config=evaluator_config_dict(ev), normalizer=normalizer)  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def setup(tmp_path_factory):
+    root = tmp_path_factory.mktemp("eval-report")
+    cfg = PrepareConfig(train_scenes=4, val_scenes=2, test_scenes=8, test_groups=3)
+    prepare_corpus(root / "corpus", {"bandai": BANDAI_FIXTURE}, cfg, progress=False,
+                   log=lambda s: None)  # fmt: skip
+    norm = Corpus.load(root / "corpus").normalizer
+    save_tiny_model(root / "tiny" / "model", norm)
+    save_tiny_model(root / "reaction", norm, "sflow.reaction_only=true")
+    save_tiny_evaluators(root / "evrun", norm)
+    return root
+
+
+def test_quick_eval_end_to_end(setup):
+    root, out = setup, setup / "results"
+    args = ["eval", "--checkpoint", str(root / "tiny" / "model"), "--evaluator",
+            str(root / "evrun"), "--corpus", str(root / "corpus"), "--out", str(out), "--quick",
+            "--variant", f"reaction-only={root / 'reaction'}", "--no-progress",
+            "--device", "cpu"]  # fmt: skip
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    for name in ("report.md", "metrics.json", "accumulation.png", "accumulation.csv",
+                 "relations.png", "examples.png"):  # fmt: skip
+        assert (out / name).stat().st_size > 0, name
+    m = json.loads((out / "metrics.json").read_text())
+    assert [s["name"] for s in m["sources"]] == ["real", "tiny", "reaction-only"]
+    proto = m["protocol"]["interaction"]
+    assert proto["items"] == proto["group"] == 8  # fewer than 96 test items: groups of 8
+    for src in ("real", "tiny", "reaction-only"):
+        got = proto["results"][src]
+        assert {"fid", "r_precision_top1", "r_precision_top3", "mm_dist", "diversity"} <= set(got)
+        assert len(got["fid"]) == 2  # mean, CI
+    assert "multimodality" in proto["results"]["tiny"]
+    assert "single" not in m["protocol"]  # one single test clip: skipped, and said so
+    assert any("single-person protocol skipped" in n for n in m["notes"])
+    for name in ("pairs", "groups"):
+        assert m["relations"][name]["real"]["scene_accuracy"] == 1.0
+        assert 0.0 <= m["relations"][name]["tiny"]["scene_accuracy"] <= 1.0
+        assert set(m["physics"][name]) == {"real", "tiny", "reaction-only"}
+        assert m["physics"][name]["real"]["penetration_cm"][0] == 0.0  # composer keeps apart
+    assert m["relations"]["all"]["real"]["num_scenes"] == 8 + 3
+    assert {r["variant"] for r in m["accumulation"]} == {"tiny", "reaction-only"}
+    assert {r["N"] for r in m["accumulation"]} == {2, 3, 4}
+    speed = m["speed"]["tiny"]
+    assert speed["nfe"] == 6 + 3  # P-Flow 4 + 2, S-Flow 3
+    assert speed["flops"] > speed["text_encoder_flops"] > 0
+    text = (out / "report.md").read_text()
+    assert text.startswith("# UMF evaluation: tiny")
+    assert "umf eval --checkpoint" in text and "--quick" in text
+    assert "groups of 8 instead of 96" in text and "![examples](examples.png)" in text
+
+
+def test_plan_and_helpers():
+    quick = R.make_plan(quick=True, mm_samples=3)
+    assert (quick.replications, quick.mm_prompts, quick.mm_pairs) == (2, 8, 3)
+    assert R.make_plan().replications == 20 and R.make_plan().accumulation_sizes[-1] == 8
+    assert R.length_batches([30, 40, 30, 30, 40], 2) == [[0, 2], [3], [1, 4]]
+    assert R.clamp_frames([3, 50, 400], 300) == [15, 50, 300]
+    assert R.bucket_frames([16, 30, 31, 290], 15, 300) == [30, 30, 45, 300]
+    assert R.bucket_frames([16, 31], 1, 300) == [16, 31]
+    assert R.batch_seed(0, 1) == R.batch_seed(0, 1) != R.batch_seed(0, 2)
+    assert R.parse_variant("no-pyramid=runs/a/model")[0] == "no-pyramid"
+    assert R.model_label(R.Path("runs/small/model")) == "small"
+    assert R.fmt(0.5, 0.01) == "0.500 ± 0.010" and R.fmt(float("nan")) == "—"
+    assert R.jsonable({"a": (np.float32(1.5), float("inf"))}) == {"a": [1.5, None]}
+
+
+def test_generation_keeps_each_length(setup):
+    plan = R.make_plan(quick=True)  # lengths bucketed by 15 frames, then cut back
+    (c,) = R.load_contenders(setup / "tiny" / "model", [], "cpu", plan, progress=False)
+    feats = c.features_fn(2)(
+        ["a person waves", "two people bow", "a person runs"], [20, 37, 500], 0
+    )
+    assert [f.shape for f in feats] == [(2, 20, 262), (2, 37, 262), (2, 120, 262)]
+    assert c.timing[2][1] == 3
+
+
+def _umf(monkeypatch, capsys, *args: str) -> tuple[int, str]:
+    """The console entry point in-process: (exit code, stderr)."""
+    monkeypatch.setattr(sys, "argv", ["umf", *args])
+    with pytest.raises(SystemExit) as exc:
+        run()
+    return int(exc.value.code or 0), capsys.readouterr().err
+
+
+def test_bad_inputs_are_one_line(setup, tmp_path, monkeypatch, capsys):
+    root = setup
+    model, corpus = str(root / "tiny" / "model"), str(root / "corpus")
+    monkeypatch.chdir(tmp_path)  # no out/corpus here
+    code, err = _umf(monkeypatch, capsys, "eval", "--checkpoint", model)
+    assert code == 1 and "make corpus" in err and err.count("\n") == 1
+    code, err = _umf(monkeypatch, capsys, "eval", "--checkpoint", str(tmp_path / "nope"),
+                     "--corpus", corpus)  # fmt: skip
+    assert code == 1 and "model not found" in err and err.count("\n") == 1
+    code, err = _umf(monkeypatch, capsys, "eval", "--checkpoint", model, "--variant", "x")
+    assert code == 1 and "NAME=MODEL_DIR" in err
+    bad = tmp_path / "bad-evaluator" / "interaction"
+    bad.mkdir(parents=True)
+    (bad / "format.json").write_text("{not json")
+    out = tmp_path / "report"
+    code, err = _umf(monkeypatch, capsys, "eval", "--checkpoint", model, "--corpus", corpus,
+                     "--evaluator", str(bad.parent), "--out", str(out), "--quick")  # fmt: skip
+    assert code == 1 and err.startswith("umf: error:") and err.count("\n") == 1
+    assert not out.exists()  # nothing half-written
+
+
+def test_evaluator_locations(setup, tmp_path):
+    ev = setup / "evrun" / "evaluator"
+    assert set(R.load_evaluators(setup / "evrun", None, "cpu")) == {"interaction", "single"}
+    assert set(R.load_evaluators(ev, None, "cpu")) == {"interaction", "single"}  # bundled layout
+    assert set(R.load_evaluators(ev / "interaction", None, "cpu")) == {"interaction"}
+    run = tmp_path / "run" / "evaluator"
+    shutil.copytree(ev / "interaction", run / "interaction")
+    (run / "single").mkdir()  # its training has not written a checkpoint yet
+    assert set(R.load_evaluators(tmp_path / "run", None, "cpu")) == {"interaction"}
+    with pytest.raises(UMFError, match="interaction"):
+        R.load_evaluators(ev / "single", None, "cpu")
+    with pytest.raises(UMFError, match="not found"):
+        R.load_evaluators(tmp_path / "nowhere", None, "cpu")
