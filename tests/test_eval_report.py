@@ -115,6 +115,24 @@ def test_quick_eval_end_to_end(setup):
     assert "groups of 8 instead of 96" in text and "![examples](examples.png)" in text
 
 
+def test_quick_eval_of_the_bundled_model(setup):
+    """The smoke run: the shipped model scored by the shipped evaluators (the default)."""
+    from umf.pipeline import default_model_dir
+
+    out = setup / "bundled"
+    args = ["eval", "--checkpoint", str(default_model_dir()), "--corpus", str(setup / "corpus"),
+            "--out", str(out), "--quick", "--no-progress", "--device", "cpu"]  # fmt: skip
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    m = json.loads((out / "metrics.json").read_text())
+    names = [s["name"] for s in m["sources"]]
+    assert names[0] == "real" and names[1].startswith("umf-small-bandai")
+    top3 = m["protocol"]["interaction"]["results"]["real"]["r_precision_top3"][0]
+    assert 0.0 < top3 <= 1.0
+    assert m["relations"]["pairs"]["real"]["scene_accuracy"] == 1.0
+    assert (out / "report.md").read_text().startswith("# UMF evaluation: umf-small-bandai")
+
+
 def test_plan_and_helpers():
     quick = R.make_plan(quick=True, mm_samples=3)
     assert (quick.replications, quick.mm_prompts, quick.mm_pairs) == (2, 8, 3)
