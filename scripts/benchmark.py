@@ -13,7 +13,6 @@ Prints, and writes as JSON with ``--out``:
 from __future__ import annotations
 
 import argparse
-import json
 import platform
 import statistics
 import time
