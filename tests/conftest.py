@@ -14,6 +14,15 @@ SHARED_BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "banda
 torch.set_num_threads(2)
 
 
+@pytest.fixture(scope="module")
+def one_thread():
+    """Tiny models: one thread avoids OpenMP spinning on a busy 2-core machine (10-100x)."""
+    before = torch.get_num_threads()
+    torch.set_num_threads(1)
+    yield
+    torch.set_num_threads(before)
+
+
 @pytest.fixture(scope="session")
 def bandai_clips():
     from umf.data.bandai import load_bandai
