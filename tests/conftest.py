@@ -31,6 +31,17 @@ def bandai_clips():
 
 
 @pytest.fixture(scope="session")
+def actors(bandai_clips):
+    """The bundled clips as scene-composer actors (person 1 of each clip)."""
+    from umf.data.scenes import Actor
+
+    return [
+        Actor.from_joints(c.id, c.joints[0], c.meta["content"], c.meta["style"])
+        for c in bandai_clips
+    ]
+
+
+@pytest.fixture(scope="session")
 def real_joints(bandai_clips):
     """One real walking clip, (T, 22, 3) float64 torch, for maths tests."""
     clip = next(c for c in bandai_clips if c.id == "dataset-1_walk_normal_001")

@@ -59,12 +59,15 @@ def test_motion_inputs_drop_contacts_and_stack_people():
 
 
 def test_sinusoidal_table_convention():
-    t = E.sinusoidal_table(50, 6)
+    """The evaluator's positions use the VAE's table (one convention in the project)."""
+    from umf.models.vae import sinusoidal_embedding
+
+    t = sinusoidal_embedding(50, 6)
     pos, i = 37, 2  # channels 2i (sin) and 2i + 1 (cos), wavelength 10000^(2i/d)
     w = pos / 10000 ** (2 * i / 6)
     assert t[pos, 2 * i].item() == pytest.approx(math.sin(w), abs=1e-5)
     assert t[pos, 2 * i + 1].item() == pytest.approx(math.cos(w), abs=1e-5)
-    assert E.sinusoidal_table(4, 5).shape == (4, 5)
+    assert sinusoidal_embedding(4, 5).shape == (4, 5)
 
 
 def test_patch_frames():

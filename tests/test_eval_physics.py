@@ -2,18 +2,10 @@ import numpy as np
 import pytest
 import torch
 
-from umf.data.scenes import Actor, build_scene, compose_corpus
+from umf.data.scenes import build_scene, compose_corpus
 from umf.eval import physics as P
 
 FPS = 30.0
-
-
-@pytest.fixture(scope="module")
-def actors(bandai_clips):
-    return [
-        Actor.from_joints(c.id, c.joints[0], c.meta["content"], c.meta["style"])
-        for c in bandai_clips
-    ]
 
 
 @pytest.fixture(scope="module")

@@ -4,16 +4,8 @@ import numpy as np
 import pytest
 
 from umf.data.relations import facing_dirs, lateral_offset, root_xz
-from umf.data.scenes import Actor, build_scene, compose_corpus, yaw_rotate
+from umf.data.scenes import build_scene, compose_corpus, yaw_rotate
 from umf.eval.relations import real_scene_joints, relation_accuracy, scene_checks
-
-
-@pytest.fixture(scope="module")
-def actors(bandai_clips):
-    return [
-        Actor.from_joints(c.id, c.joints[0], c.meta["content"], c.meta["style"])
-        for c in bandai_clips
-    ]
 
 
 @pytest.fixture(scope="module")

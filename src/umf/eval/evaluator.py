@@ -29,7 +29,6 @@ motion token, our deviation to make a CPU run affordable; 1 is InterCLIP exactly
 from __future__ import annotations
 
 import dataclasses
-import math
 import os
 from collections.abc import Mapping, Sequence
 from pathlib import Path
@@ -41,6 +40,7 @@ from torch import Tensor, nn
 
 from umf.config import EvaluatorConfig
 from umf.errors import UMFError
+from umf.models.vae import sinusoidal_embedding
 from umf.representation import CONTACT, FEATURE_DIM, Normalizer
 from umf.text import TextFeatures, last_real
 
@@ -59,16 +59,6 @@ class TextSource(Protocol):
 
 
 # --------------------------------------------------------------------- pure helpers
-def sinusoidal_table(length: int, dim: int) -> Tensor:
-    """(length, dim): sin at even, cos at odd channels, wavelengths 2pi .. 10000 * 2pi."""
-    pos = torch.arange(length, dtype=torch.float32)[:, None]
-    freq = torch.exp(torch.arange(0, dim, 2, dtype=torch.float32) * (-math.log(10000.0) / dim))
-    table = torch.zeros(length, dim)
-    table[:, 0::2] = torch.sin(pos * freq)
-    table[:, 1::2] = torch.cos(pos * freq[: dim // 2])
-    return table
-
-
 def motion_inputs(features: Tensor, num_people: int) -> Tensor:
     """(B, P, T, 262) (or (B, T, 262) for one person) -> (B, T, P * 258), contacts dropped.
 
@@ -151,7 +141,7 @@ class MotionTower(nn.Module):
         self.register_buffer("in_std", torch.ones(in_dim))
         self.query = nn.Parameter(torch.randn(1, cfg.d_model))
         self.embed = nn.Linear(in_dim * cfg.frames_per_token, cfg.d_model)
-        self.register_buffer("pe", sinusoidal_table(PE_LENGTH, cfg.d_model), persistent=False)
+        self.register_buffer("pe", sinusoidal_embedding(PE_LENGTH, cfg.d_model), persistent=False)
         self.pe_dropout = nn.Dropout(cfg.dropout)
         self.encoder = _encoder(cfg.d_model, cfg.num_heads, cfg.ff_dim, cfg.num_layers, cfg.dropout)
         self.out_ln = nn.LayerNorm(cfg.d_model)
