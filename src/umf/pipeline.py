@@ -27,9 +27,10 @@ from umf.errors import UMFError
 from umf.representation import (
     Normalizer,
     RigidTransform,
+    assemble_features,
     canonical_transform,
     features_to_joints,
-    joints_to_features,
+    joints_to_rot6d,
     transform_features,
 )
 from umf.separation import separate_people
@@ -244,7 +245,8 @@ class UMFPipeline:
         if actor is not None:
             actor_t, frame = self._canonical_actor(actor)
             t = actor_t.shape[0] - 1  # T joint frames are T - 1 feature frames
-            latents = [self._encode_actor(actor_t, b)]
+            rot6d = joints_to_rot6d(actor_t)  # local rotations: the same in the user's frame
+            latents = [self._encode_actor(assemble_features(actor_t, rot6d), b)]
         else:
             t = self._frames(seconds)
             dataset = torch.full((b,), 1 if num_people > 1 else 0, dtype=torch.long)
@@ -275,7 +277,7 @@ class UMFPipeline:
         feats = self.decode(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
         if frame is not None:  # back into the user's frame; person 1 is their motion exactly
             feats = transform_features(feats.cpu(), frame, inverse=True)
-            feats[:, 0] = joints_to_features(torch.from_numpy(actor).float())
+            feats[:, 0] = assemble_features(torch.from_numpy(actor).float(), rot6d)
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
         if separate and num_people > 1:
             feats = feats.cpu()
@@ -321,10 +323,9 @@ class UMFPipeline:
         frame = canonical_transform(joints)
         return frame.apply(joints), frame
 
-    def _encode_actor(self, actor: torch.Tensor, batch: int) -> torch.Tensor:
-        """Latent (batch, p, r) of canonical actor joints (T, 22, 3): the posterior mean."""
-        f = joints_to_features(actor)
-        x = self.normalizer.normalize(f)[None].to(self.device)
+    def _encode_actor(self, features: torch.Tensor, batch: int) -> torch.Tensor:
+        """Latent (batch, p, r) of the canonical actor's features (T, 262): posterior mean."""
+        x = self.normalizer.normalize(features)[None].to(self.device)
         mask = torch.ones(1, x.shape[1], dtype=torch.bool, device=self.device)
         mu, _ = self.vae.encode(x, mask)
         return mu.expand(batch, -1, -1)
