@@ -136,10 +136,48 @@ def test_plan_and_helpers():
     assert R.bucket_frames([16, 30, 31, 290], 15, 300) == [30, 30, 45, 300]
     assert R.bucket_frames([16, 31], 1, 300) == [16, 31]
     assert R.batch_seed(0, 1) == R.batch_seed(0, 1) != R.batch_seed(0, 2)
-    assert R.parse_variant("no-pyramid=runs/a/model")[0] == "no-pyramid"
+    assert R.parse_variant("no-pyramid=runs/a/model") == ("no-pyramid", R.Path("runs/a/model"), {})
+    assert R.parse_variant("25-25=m:pflow_steps=25,25:sflow_steps=4:guidance=2")[2] == {
+        "pflow_steps": (25, 25), "sflow_steps": 4, "guidance": 2.0}
+    for bad in ("x", "=m", "a=m:steps=3", "a=m:sflow_steps=many", "a=m:pflow_steps"):
+        with pytest.raises(UMFError):
+            R.parse_variant(bad)
     assert R.model_label(R.Path("runs/small/model")) == "small"
     assert R.fmt(0.5, 0.01) == "0.500 ± 0.010" and R.fmt(float("nan")) == "—"
     assert R.jsonable({"a": (np.float32(1.5), float("inf"))}) == {"a": [1.5, None]}
+
+
+def test_variants_share_the_first_person_only_when_it_is_the_same(setup, monkeypatch):
+    plan, tiny = R.make_plan(quick=True), setup / "tiny" / "model"
+    variants = [("s-steps", tiny, {"sflow_steps": 2}), ("p-steps", tiny, {"pflow_steps": (2, 1)}),
+                ("reaction-only", setup / "reaction")]  # same seed: same VAE and P-Flow
+    cs = R.load_contenders(tiny, variants, "cpu", plan, progress=False)
+    assert cs[0].pipe is cs[1].pipe is cs[2].pipe and cs[3].pipe is not cs[0].pipe
+    keys = [R.person_one_key(c) for c in cs]
+    assert keys[0] == keys[1] == keys[3] != keys[2]
+    assert cs[1].features_fn(2)(["two people bow"], [30], 0)[0].shape == (2, 30, 262)
+
+    calls = []  # the single-person protocol scores each distinct first person once
+
+    def score(evaluator, items, generate, cfg, log):
+        calls.append(generate)
+        return {"real": {"fid": (0.0, 0.0)}, "generated": {"fid": (float(len(calls)), 0.0)}}
+
+    class Item:
+        num_frames = 30
+
+    monkeypatch.setattr(R, "corpus_items", lambda corpus, split, kind: [Item()] * 4)
+    monkeypatch.setattr(R, "score_protocol", score)
+    ev = type("Ev", (), {"cfg": type("C", (), {"max_frames": 300})()})()
+    notes: list[str] = []
+    out = R.protocol_section(ev, None, "single", cs, plan, notes, lambda s: None)
+    assert len(calls) == 2
+    assert out["results"]["s-steps"] == out["results"]["reaction-only"] == out["results"]["tiny"]
+    assert out["results"]["p-steps"] != out["results"]["tiny"]
+    assert sum("shares its scores" in n for n in notes) == 2
+    calls.clear()
+    R.protocol_section(ev, None, "interaction", cs, plan, [], lambda s: None)
+    assert len(calls) == 4  # two people: every contender is scored
 
 
 def test_generation_keeps_each_length(setup):

@@ -66,7 +66,9 @@ def evaluate(
     ),
     mm_samples: int | None = typer.Option(None, "--mm-samples", help="Samples per prompt (30)."),
     variant: list[str] = typer.Option(
-        [], "--variant", help="Also evaluate NAME=MODEL_DIR (repeatable), e.g. an ablation."
+        [], "--variant",
+        help="Also evaluate NAME=MODEL_DIR[:pflow_steps=A,B][:sflow_steps=S][:guidance=G] "
+        "(repeatable): an ablation, or the same model at other sampling settings.",
     ),
     seed: int = typer.Option(0, "--seed", help="Seed of every draw and generation."),
     batch: int = typer.Option(64, "--batch", help="Prompts per pipeline call."),

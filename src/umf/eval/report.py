@@ -125,12 +125,36 @@ def make_plan(
     return dataclasses.replace(plan, mm_pairs=min(plan.mm_pairs, plan.mm_samples))
 
 
-def parse_variant(text: str) -> tuple[str, Path]:
-    """``NAME=MODEL_DIR`` -> (name, path); one-line error otherwise."""
-    name, sep, path = text.partition("=")
+VARIANT_SETTINGS = {"pflow_steps", "sflow_steps", "guidance"}
+
+
+def parse_variant(text: str) -> tuple[str, Path, dict[str, Any]]:
+    """``NAME=MODEL_DIR[:key=value...]`` -> (name, path, sampling settings).
+
+    The settings are the pipeline's sampling arguments, so one trained model can be scored
+    at several step allocations: ``25-25=src/umf/assets/model:pflow_steps=25,25``
+    (``pflow_steps`` coarse -> fine, ``sflow_steps``, ``guidance``). One-line error otherwise.
+    """
+    name, sep, rest = text.partition("=")
+    path, *pairs = rest.split(":")
     if not sep or not name.strip() or not path.strip():
-        raise UMFError(f"--variant takes NAME=MODEL_DIR, got {text!r}")
-    return name.strip(), Path(path.strip())
+        raise UMFError(f"--variant takes NAME=MODEL_DIR[:key=value...], got {text!r}")
+    settings: dict[str, Any] = {}
+    for pair in pairs:
+        key, eq, value = (x.strip() for x in pair.partition("="))
+        if not eq or key not in VARIANT_SETTINGS:
+            raise UMFError(f"--variant {name.strip()}: unknown setting {pair!r} (known: "
+                           f"{', '.join(sorted(VARIANT_SETTINGS))})")  # fmt: skip
+        try:
+            if key == "pflow_steps":
+                settings[key] = tuple(int(v) for v in value.split(","))
+            elif key == "sflow_steps":
+                settings[key] = int(value)
+            else:
+                settings[key] = float(value)
+        except ValueError:
+            raise UMFError(f"--variant {name.strip()}: bad value in {pair!r}") from None
+    return name.strip(), Path(path.strip()), settings
 
 
 def model_label(path: Path) -> str:
@@ -220,6 +244,7 @@ class Contender:
     batch: int = 64
     progress: bool = True
     length_step: int = 1
+    settings: dict[str, Any] = field(default_factory=dict)  # sampling arguments (--variant)
     timing: dict[int, list[float]] = field(default_factory=dict)  # people -> [seconds, scenes]
 
     @property
@@ -256,7 +281,8 @@ class Contender:
             t0 = time.perf_counter()
             scenes = self.pipe([captions[j] for j in idx], num_people=people,
                                seconds=sizes[idx[0]] / self.pipe.config.fps,
-                               seed=batch_seed(seed, i), separate=False)  # fmt: skip
+                               seed=batch_seed(seed, i), separate=False,
+                               **self.settings)  # fmt: skip
             spent = self.timing.setdefault(people, [0.0, 0])
             spent[0] += time.perf_counter() - t0
             spent[1] += len(idx)
@@ -286,24 +312,47 @@ class Contender:
 
 def load_contenders(
     checkpoint: Path,
-    variants: Sequence[tuple[str, Path]],
+    variants: Sequence[tuple[str, Path, dict[str, Any]] | tuple[str, Path]],
     device: str,
     plan: EvalPlan,
     progress: bool = True,
 ) -> list[Contender]:
-    """The model and its variants, loaded and checked (unique names, the corpus frame rate)."""
-    named = [(model_label(checkpoint), Path(checkpoint), "model")]
-    named += [(n, Path(p), "variant") for n, p in variants]
-    names = [n for n, _, _ in named]
+    """The model and its variants, loaded and checked (unique names, the corpus frame rate).
+
+    Variants naming the same directory share one loaded pipeline (step allocations)."""
+    named = [(model_label(checkpoint), Path(checkpoint), "model", {})]
+    named += [(v[0], Path(v[1]), "variant", dict(v[2]) if len(v) > 2 else {}) for v in variants]
+    names = [n for n, *_ in named]
     if REAL in names or len(set(names)) != len(names):
         raise UMFError(f"model and variant names must be unique and not {REAL!r}: {names}")
-    out = []
-    for name, path, role in named:
-        pipe = UMFPipeline.from_pretrained(path).to(device)
+    out: list[Contender] = []
+    loaded: dict[str, UMFPipeline] = {}
+    for name, path, role, settings in named:
+        key = os.path.realpath(path)
+        if key not in loaded:
+            loaded[key] = UMFPipeline.from_pretrained(path).to(device)
+        pipe = loaded[key]
         if pipe.config.fps != FPS:
             raise UMFError(f"{path}: a {pipe.config.fps} fps model; evaluation is at {FPS} fps")
-        out.append(Contender(name, path, pipe, role, plan.batch, progress, plan.length_step))
+        out.append(Contender(name, path, pipe, role, plan.batch, progress, plan.length_step,
+                             settings))  # fmt: skip
     return out
+
+
+def person_one_key(c: Contender) -> str:
+    """What decides a contender's first person: the VAE, text encoder and P-Flow weights
+    and the P-Flow sampling settings. Equal keys give identical single-person scenes under
+    one seed, so the single-person protocol is scored once per key."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for module in (c.pipe.vae, c.pipe.pflow, c.pipe.text_encoder):
+        for k, v in sorted(module.state_dict().items()):
+            h.update(k.encode())
+            h.update(v.detach().cpu().contiguous().numpy().tobytes())
+    sampling = {k: c.settings.get(k) for k in ("pflow_steps", "guidance")}
+    h.update(repr(sorted(sampling.items())).encode())
+    return h.hexdigest()
 
 
 # --------------------------------------------------------------------- evaluators
@@ -366,7 +415,15 @@ def protocol_section(
     evaluated = (len(items) // group) * group
     mm = min(plan.mm_prompts, evaluated) * plan.mm_samples  # the protocol's MModality draw
     results: dict[str, Any] = {}
+    done: dict[str, str] = {}  # single person: person_one_key -> contender scored
     for c in contenders:
+        key = person_one_key(c) if people == 1 else c.name
+        if key in done:
+            results[c.name] = results[done[key]]
+            notes.append(f"{label} protocol: {c.name} has the first person of {done[key]} "
+                         "(same VAE, P-Flow and sampling), so it shares its scores.")  # fmt: skip
+            continue
+        done[key] = c.name
         total = plan.replications * (evaluated + mm)
         log(f"{label} protocol, {c.name}: {plan.replications} replications x ({evaluated} "
             f"scenes + {mm} for MModality) = {total} scenes")  # fmt: skip
@@ -518,7 +575,8 @@ def speed_section(c: Contender, prompt: str, repeats: int, seed: int) -> dict[st
     frames = min(SCENE_FRAMES, c.max_frames)
 
     def one() -> Scene:
-        return c.pipe(prompt, num_people=2, seconds=frames / c.pipe.config.fps, seed=seed)[0]
+        return c.pipe(prompt, num_people=2, seconds=frames / c.pipe.config.fps, seed=seed,
+                      **c.settings)[0]
 
     one()  # warm-up: lazy initialisation and caches out of the timing
     times = []
@@ -792,7 +850,7 @@ class EvalRequest:
     corpus: Path
     out: Path
     evaluator: Path | None = None
-    variants: list[tuple[str, Path]] = field(default_factory=list)
+    variants: list[tuple[str, Path, dict[str, Any]]] = field(default_factory=list)
     plan: EvalPlan = field(default_factory=EvalPlan)
     device: str = "cpu"
     progress: bool = True
@@ -870,7 +928,7 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
         },
         "plan": dataclasses.asdict(plan),
         "sources": [{"name": REAL, "role": "real"}]
-        + [{"name": c.name, "role": c.role, "path": str(c.path),
+        + [{"name": c.name, "role": c.role, "path": str(c.path), "settings": c.settings,
             "reaction_only": c.reaction_only} for c in contenders],
         "notes": notes,
         "protocol": {k: v for k, v in protocol.items() if v is not None},
