@@ -138,7 +138,10 @@ def test_plan_and_helpers():
     assert R.batch_seed(0, 1) == R.batch_seed(0, 1) != R.batch_seed(0, 2)
     assert R.parse_variant("no-pyramid=runs/a/model") == ("no-pyramid", R.Path("runs/a/model"), {})
     assert R.parse_variant("25-25=m:pflow_steps=25,25:sflow_steps=4:guidance=2")[2] == {
-        "pflow_steps": (25, 25), "sflow_steps": 4, "guidance": 2.0}
+        "pflow_steps": (25, 25),
+        "sflow_steps": 4,
+        "guidance": 2.0,
+    }
     for bad in ("x", "=m", "a=m:steps=3", "a=m:sflow_steps=many", "a=m:pflow_steps"):
         with pytest.raises(UMFError):
             R.parse_variant(bad)
@@ -149,8 +152,11 @@ def test_plan_and_helpers():
 
 def test_variants_share_the_first_person_only_when_it_is_the_same(setup, monkeypatch):
     plan, tiny = R.make_plan(quick=True), setup / "tiny" / "model"
-    variants = [("s-steps", tiny, {"sflow_steps": 2}), ("p-steps", tiny, {"pflow_steps": (2, 1)}),
-                ("reaction-only", setup / "reaction")]  # same seed: same VAE and P-Flow
+    variants = [
+        ("s-steps", tiny, {"sflow_steps": 2}),
+        ("p-steps", tiny, {"pflow_steps": (2, 1)}),
+        ("reaction-only", setup / "reaction"),
+    ]  # same seed: same VAE and P-Flow
     cs = R.load_contenders(tiny, variants, "cpu", plan, progress=False)
     assert cs[0].pipe is cs[1].pipe is cs[2].pipe and cs[3].pipe is not cs[0].pipe
     keys = [R.person_one_key(c) for c in cs]

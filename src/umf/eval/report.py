@@ -575,8 +575,9 @@ def speed_section(c: Contender, prompt: str, repeats: int, seed: int) -> dict[st
     frames = min(SCENE_FRAMES, c.max_frames)
 
     def one() -> Scene:
-        return c.pipe(prompt, num_people=2, seconds=frames / c.pipe.config.fps, seed=seed,
-                      **c.settings)[0]
+        return c.pipe(
+            prompt, num_people=2, seconds=frames / c.pipe.config.fps, seed=seed, **c.settings
+        )[0]
 
     one()  # warm-up: lazy initialisation and caches out of the timing
     times = []
