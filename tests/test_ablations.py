@@ -75,3 +75,31 @@ def test_ablation_trains_and_samples(name):
     )
     assert nfe2 == cfg.sflow.steps * per_step
     assert torch.isfinite(z1).all() and torch.isfinite(w).all()
+
+
+def test_shared_backbone_model_loads_the_fine_tuned_transformer_for_both_flows(tmp_path):
+    """S-Flow training fine-tunes the shared transformer, so a loaded model must run P-Flow
+    with S-Flow's copy of it (the P-Flow checkpoint still holds the pre-S-Flow weights)."""
+    from umf.pipeline import UMFPipeline
+    from umf.train.checkpoint import save_checkpoint
+
+    cfg = small_config()
+    for o in (*TINY_MODEL, "sflow.shared_backbone=true"):
+        cfg = set_option(cfg, o)
+    torch.manual_seed(0)
+    pipe = UMFPipeline.build(cfg)
+    pflow_state = {k: v.clone() for k, v in pipe.pflow.state_dict().items()}
+    with torch.no_grad():  # "fine-tune" the shared transformer
+        for p in pipe.sflow.net.parameters():
+            p.add_(0.5)
+    modules = {"vae": pipe.vae, "pflow": pflow_state, "sflow": pipe.sflow}
+    save_checkpoint(tmp_path / "m", modules, config=cfg.to_dict(), normalizer=pipe.normalizer)
+    loaded = UMFPipeline.from_pretrained(tmp_path / "m")
+    assert loaded.pflow.net is loaded.sflow.net
+    for k, v in pipe.sflow.net.state_dict().items():
+        torch.testing.assert_close(loaded.pflow.net.state_dict()[k], v)
+    k = next(iter(pflow_state))
+    assert k.startswith("net.")  # the stale copy really was in the P-Flow file
+    assert not torch.equal(loaded.pflow.state_dict()[k], pflow_state[k])
+    scene = loaded("two people bow", num_people=2, seconds=1.0, seed=0)[0]
+    assert torch.isfinite(torch.as_tensor(scene.joints)).all()
