@@ -39,7 +39,11 @@ WHAT = {
     "no-context-adapter": "context enters S-Flow without the transformer adapter",
     "shared-backbone": "S-Flow reuses (and fine-tunes) the P-Flow transformer",
 }
-MAIN_WHAT = "bundled model: 45 + 5 P-Flow steps, 10 S-Flow steps"
+MAIN_WHAT = {  # the report's main model (named after its run) per table
+    "latent": WHAT["multi-token"],
+    "pyramid": "bundled model: 45 coarse + 5 fine P-Flow steps, 10 S-Flow steps",
+    "sflow": "bundled model: semi-noise flow with context adapter and recon loss",
+}
 
 
 def mean(x: Any) -> float | None:
@@ -50,8 +54,8 @@ def fmt(x: Any, digits: int = 3) -> str:
     v = mean(x)
     if v is None:
         return "—"
-    ci = x[1] if isinstance(x, list) and len(x) > 1 and x[1] is not None else None
-    return f"{v:.{digits}f}" + (f" ± {ci:.{digits}f}" if ci else "")
+    ci = x[1] if isinstance(x, list) and len(x) > 1 else None
+    return f"{v:.{digits}f}" + (f" ± {ci:.{digits}f}" if ci is not None else "")
 
 
 def relation(r: dict[str, Any]) -> str:
@@ -136,7 +140,7 @@ def rows_for(
         if s.get("settings"):
             secs = 0.0  # the same trained model, sampled differently
         row = [
-            name, WHAT.get(name, MAIN_WHAT if s["role"] == "model" else ""),
+            name, MAIN_WHAT[key] if s["role"] == "model" else WHAT.get(name, ""),
             fmt(g["fid"], 1), fmt(g["r_precision_top3"]), fmt(g["mm_dist"]),
             fmt(sg.get("fid"), 1), fmt(sg.get("r_precision_top3")),
             relation(m["relations"]["pairs"][name]),
