@@ -23,11 +23,12 @@ from_run() {  # a variant run starting from RUN's config, VAE and the given flow
   cp "$RUN/config.yaml" "$WORK/$1/"
   for stage in vae "$2"; do rm -rf "${WORK:?}/$1/$stage"; cp -r "$RUN/$stage" "$WORK/$1/"; done
 }
-train() {  # stage run [--set ...]: skipped when the stage already finished
-  local stage=$1 dir=$WORK/$2
+train() {  # stage run [--set ...]: skipped when finished, resumed when killed
+  local stage=$1 dir=$WORK/$2 resume=()
   shift 2
   [ -e "$dir/$stage/best" ] && [ -e "$dir/$stage/.done" ] && return
-  "$UMF" train "$stage" --corpus "$CORPUS" --out "$dir" --no-progress "$@"
+  [ -e "$dir/$stage/last" ] && resume=(--resume)
+  "$UMF" train "$stage" --corpus "$CORPUS" --out "$dir" --no-progress "${resume[@]}" "$@"
   touch "$dir/$stage/.done"
 }
 export_model() { "$UMF" train export --run "$WORK/$1" --out "$WORK/$1/model"; }
