@@ -46,16 +46,12 @@ MAIN_WHAT = {  # the report's main model (named after its run) per table
 }
 
 
-def mean(x: Any) -> float | None:
-    return x[0] if isinstance(x, list) else x
-
-
 def fmt(x: Any, digits: int = 3) -> str:
-    v = mean(x)
-    if v is None:
-        return "—"
-    ci = x[1] if isinstance(x, list) and len(x) > 1 else None
-    return f"{v:.{digits}f}" + (f" ± {ci:.{digits}f}" if ci is not None else "")
+    """A report value (``[mean, ci]`` or a number) as ``mean ± ci``."""
+    from umf.eval.report import _pair
+    from umf.eval.report import fmt as report_fmt
+
+    return report_fmt(*_pair(x), digits=digits)
 
 
 def relation(r: dict[str, Any]) -> str:
@@ -157,13 +153,6 @@ def rows_for(
     return header, rows
 
 
-def md_table(header: list[str], rows: list[list[str]]) -> str:
-    lines = ["| " + " | ".join(header) + " |", "|" + "|".join([":---"] * 2 + ["---:"] *
-             (len(header) - 2)) + "|"]  # fmt: skip
-    lines += ["| " + " | ".join(r) + " |" for r in rows]
-    return "\n".join(lines)
-
-
 def plot(tables: dict[str, dict[str, Any]], path: Path) -> None:
     """FID and R-precision top-3 (two people) per variant, one panel pair per table."""
     import matplotlib
@@ -208,6 +197,8 @@ def main() -> None:
               for k in TABLES if (args.out / k / "metrics.json").exists()}  # fmt: skip
     if not tables:
         raise SystemExit(f"no ablation reports under {args.out}")
+    from umf.eval.report import md_table
+
     parts = [
         "# Ablations: the paper's Tables 3-5 on the Bandai corpus",
         "",
@@ -224,8 +215,8 @@ def main() -> None:
     for key, m in tables.items():
         times = retime(m["sources"][1:], args.repeats) if args.time else {}
         header, rows = rows_for(key, m, runs, times)
-        parts += [f"## {TABLES[key][0]}", "", f"Report: [{key}/report.md]({key}/report.md); "
-                  f"command: `{m['meta']['command']}`", "", md_table(header, rows), ""]  # fmt: skip
+        report = f"Report: [{key}/report.md]({key}/report.md); command: `{m['meta']['command']}`"
+        parts += [f"## {TABLES[key][0]}", "", report, "", md_table(header, rows, left=2), ""]
     notes = args.out / "notes.md"  # the reading of the tables, written by hand
     if notes.exists():
         parts += [notes.read_text().strip(), ""]

@@ -14,6 +14,15 @@ SHARED_BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "banda
 torch.set_num_threads(2)
 
 
+def prepare_fixture_corpus(out: Path, **scenes: int) -> Path:
+    """A small real corpus from the committed Bandai clips (``scenes``: PrepareConfig counts)."""
+    from umf.data.corpus import PrepareConfig, prepare_corpus
+
+    prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, PrepareConfig(**scenes), progress=False,
+                   log=lambda s: None)  # fmt: skip
+    return out
+
+
 @pytest.fixture(scope="module")
 def one_thread():
     """Tiny models: one thread avoids OpenMP spinning on a busy 2-core machine (10-100x)."""

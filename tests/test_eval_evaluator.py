@@ -10,7 +10,7 @@ import torch
 from torch import nn
 from torch.utils.data import Dataset
 
-from conftest import BANDAI_FIXTURE
+from conftest import prepare_fixture_corpus
 from umf.config import EvaluatorConfig, TrainConfig, family_config
 from umf.errors import UMFError
 from umf.eval import evaluator as E
@@ -229,12 +229,11 @@ def test_small_family_sizes():
 
 @pytest.fixture(scope="module")
 def small_corpus(tmp_path_factory):
-    from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+    from umf.data.corpus import Corpus
 
     out = tmp_path_factory.mktemp("eval-corpus")
-    cfg = PrepareConfig(train_scenes=8, val_scenes=4, test_scenes=4, test_groups=2)
-    prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=lambda s: None)
-    return Corpus.load(out)
+    return Corpus.load(prepare_fixture_corpus(out, train_scenes=8, val_scenes=4, test_scenes=4,
+                                              test_groups=2))  # fmt: skip
 
 
 def test_umf_train_evaluator_cli_with_minilm(small_corpus, tmp_path):

@@ -17,10 +17,10 @@ import pytest
 import torch
 from typer.testing import CliRunner
 
-from conftest import BANDAI_FIXTURE, TINY_MODEL
+from conftest import TINY_MODEL, prepare_fixture_corpus
 from umf.cli.main import app, run
 from umf.config import EvaluatorConfig, set_option, small_config
-from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.eval import report as R
 from umf.eval.evaluator import MotionTextEvaluator, evaluator_config_dict
@@ -60,9 +60,8 @@ def save_tiny_evaluators(run_dir, normalizer):
 @pytest.fixture(scope="module")
 def setup(tmp_path_factory):
     root = tmp_path_factory.mktemp("eval-report")
-    cfg = PrepareConfig(train_scenes=4, val_scenes=2, test_scenes=8, test_groups=3)
-    prepare_corpus(root / "corpus", {"bandai": BANDAI_FIXTURE}, cfg, progress=False,
-                   log=lambda s: None)  # fmt: skip
+    prepare_fixture_corpus(root / "corpus", train_scenes=4, val_scenes=2, test_scenes=8,
+                           test_groups=3)  # fmt: skip
     norm = Corpus.load(root / "corpus").normalizer
     save_tiny_model(root / "tiny" / "model", norm)
     save_tiny_model(root / "reaction", norm, "sflow.reaction_only=true")

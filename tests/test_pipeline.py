@@ -6,9 +6,8 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import BANDAI_FIXTURE, TINY_MODEL
+from conftest import BANDAI_FIXTURE, TINY_MODEL, prepare_fixture_corpus
 from umf.config import set_option, small_config
-from umf.data.corpus import PrepareConfig, prepare_corpus
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline
 from umf.train.run import Launch, export_model, train_stage
@@ -32,9 +31,8 @@ TINY += ["train_pflow.latent_passes=2"]  # P-Flow from a latent bank, S-Flow per
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory):
     root = tmp_path_factory.mktemp("e2e")
-    prepare_corpus(root / "corpus", {"bandai": BANDAI_FIXTURE},
-                   PrepareConfig(train_scenes=12, val_scenes=4, test_scenes=4, test_groups=2),
-                   progress=False, log=lambda s: None)  # fmt: skip
+    prepare_fixture_corpus(root / "corpus", train_scenes=12, val_scenes=4, test_scenes=4,
+                           test_groups=2)  # fmt: skip
     cfg = small_config()
     for o in TINY:
         cfg = set_option(cfg, o)

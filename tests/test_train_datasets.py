@@ -4,8 +4,8 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import BANDAI_FIXTURE
-from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+from conftest import prepare_fixture_corpus
+from umf.data.corpus import Corpus
 from umf.data.scenes import yaw_rotate
 from umf.errors import UMFError
 from umf.representation import (
@@ -25,9 +25,8 @@ from umf.train import datasets as D
 @pytest.fixture(scope="module")
 def corpus(tmp_path_factory):
     out = tmp_path_factory.mktemp("train-corpus")
-    cfg = PrepareConfig(train_scenes=8, val_scenes=2, test_scenes=2, test_groups=2)
-    prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=lambda s: None)
-    return Corpus.load(out)
+    return Corpus.load(prepare_fixture_corpus(out, train_scenes=8, val_scenes=2, test_scenes=2,
+                                              test_groups=2))  # fmt: skip
 
 
 def _raw(item_features: torch.Tensor, corpus: Corpus) -> torch.Tensor:

@@ -664,10 +664,10 @@ def fmt(value: Any, ci: Any = None, digits: int = 3) -> str:
     return f"{value:.{digits}f} ± {ci:.{digits}f}"
 
 
-def md_table(header: Sequence[str], rows: Sequence[Sequence[str]]) -> str:
-    """A GitHub markdown table, first column left-aligned, the rest right-aligned."""
+def md_table(header: Sequence[str], rows: Sequence[Sequence[str]], left: int = 1) -> str:
+    """A GitHub markdown table, the first ``left`` columns left-aligned, the rest right."""
     lines = ["| " + " | ".join(header) + " |",
-             "|" + "|".join([":---"] + ["---:"] * (len(header) - 1)) + "|"]  # fmt: skip
+             "|" + "|".join([":---"] * left + ["---:"] * (len(header) - left)) + "|"]  # fmt: skip
     lines += ["| " + " | ".join(r) + " |" for r in rows]
     return "\n".join(lines)
 
