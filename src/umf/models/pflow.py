@@ -33,6 +33,7 @@ from umf.models.denoiser import (
     repeat_text,
     resolve_guidance,
 )
+from umf.models.latent_normalizer import LatentNormalizer
 from umf.text import Pooling, TextFeatures
 
 
@@ -85,6 +86,7 @@ class PFlow(nn.Module):
         self.pyramid = PyramidConfig(
             layout=cfg.layout, num_stages=cfg.num_stages, num_tokens=num_tokens, g=cfg.g
         )
+        self.latent_norm = LatentNormalizer(num_tokens, latent_dim)  # fit by the stage
         self.net = FlowTransformer(
             cfg.denoiser,
             latent_dim,
@@ -117,6 +119,7 @@ class PFlow(nn.Module):
         b = z1.shape[0]
         if dataset is None and self.net.num_datasets > 0:
             raise ValueError("P-Flow with dataset tokens needs dataset=(B,) long")
+        z1 = self.latent_norm.normalize(z1)
         sample = pyramid_training_sample(z1, self.pyramid, generator=generator)
         drop = torch.rand(b, generator=generator, device=z1.device) < self.cfg.p_uncond
         pred = self.net(
@@ -161,7 +164,8 @@ class PFlow(nn.Module):
         guidance: GuidanceArg = FROM_CONFIG,
         generator: torch.Generator | None = None,
     ) -> tuple[Tensor, int]:
-        """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) and the NFE.
+        """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) on the VAE's
+        scale, and the NFE.
 
         Defaults come from the config; ``guidance`` None or 1.0 disables CFG (then
         ``uncond_text`` is not needed). The NFE counts guided-field evaluations (one
@@ -205,4 +209,4 @@ class PFlow(nn.Module):
                 generator=generator,
                 cond=cond,
             )
-        return z, nfe
+        return self.latent_norm.denormalize(z), nfe

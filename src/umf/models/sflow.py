@@ -33,6 +33,7 @@ from umf.models.denoiser import (
     evaluating,
     resolve_guidance,
 )
+from umf.models.latent_normalizer import LatentNormalizer
 from umf.models.pflow import encode_uncond
 from umf.text import Pooling, TextFeatures
 
@@ -63,6 +64,7 @@ class SFlow(nn.Module):
         self.cfg = cfg
         self.num_tokens, self.latent_dim = num_tokens, latent_dim
         self.state_dim = latent_dim if cfg.reaction_only else 2 * latent_dim
+        self.latent_norm = LatentNormalizer(num_tokens, latent_dim)  # fit by the stage
         self.context = ContextAdapter(
             latent_dim,
             cfg.context_heads,
@@ -136,6 +138,7 @@ class SFlow(nn.Module):
         parts are returned detached for logging. Context noise applies in training mode
         only. Gradients reach the context adapter through both the state and the targets.
         """
+        prev, w = self.latent_norm.normalize(prev), self.latent_norm.normalize(w)
         if self.training:
             prev = self.perturb_context(prev, prev_mask, generator)
         context = self.context(prev, prev_mask)
@@ -178,7 +181,7 @@ class SFlow(nn.Module):
         b = text.tokens.shape[0]
         scale = resolve_guidance(guidance, self.cfg.guidance)
         with evaluating(self):
-            context = self.context(prev, prev_mask)
+            context = self.context(self.latent_norm.normalize(prev), prev_mask)
             cond: dict[str, Any] = {"text": self.net.encode_text(text)}
             field: Callable[..., Tensor] = self.velocity
             if scale is not None:
@@ -196,4 +199,4 @@ class SFlow(nn.Module):
                 generator=generator,
                 cond=cond,
             )
-        return w, nfe
+        return self.latent_norm.denormalize(w), nfe

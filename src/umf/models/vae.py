@@ -16,14 +16,16 @@ map for scenes of several people), all restricted to valid frames.
 from __future__ import annotations
 
 import math
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import torch
 import torch.nn.functional as F
 from torch import nn
 
+from umf.body_frame import BODY_DIM, BODY_GROUPS, from_body_frame, to_body_frame
 from umf.config import VAEConfig
-from umf.representation import CONTACT, POS, VEL, Normalizer
+from umf.representation import CONTACT, FEATURE_DIM, POS, VEL, Normalizer
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT, NUM_JOINTS, bone_lengths
 
 Tensor = torch.Tensor
@@ -106,6 +108,42 @@ class VAEOutput:
     mu: Tensor  # (B, p, r)
     logvar: Tensor  # (B, p, r)
     z: Tensor  # (B, p, r) the latent that was decoded
+    y_hat: Tensor | None = None  # (B, T, D) the prediction in the VAE's own space
+    y: Tensor | None = None  # (B, T, D) the input in that space (the reconstruction target)
+
+
+def patch_frames(x: Tensor, mask: Tensor, k: int) -> tuple[Tensor, Tensor]:
+    """(B, T, D) frames -> (B, ceil(T/k), k*D) tokens of k consecutive frames, and their
+    mask (a token is valid when any of its frames is). Padding frames become zeros."""
+    b, t, d = x.shape
+    n = -(-t // k)
+    if n * k != t:
+        x = F.pad(x, (0, 0, 0, n * k - t))
+        mask = F.pad(mask, (0, n * k - t), value=False)
+    x = x.masked_fill(~mask[..., None], 0.0)
+    return x.reshape(b, n, k * d), mask.reshape(b, n, k).any(-1)
+
+
+def token_alignment(num_steps: int, frames_per_step: int, num_tokens: int, span: float) -> Tensor:
+    """(num_steps, num_tokens) linear-interpolation weights between the transformer's frame
+    steps and the latent tokens, latent token j standing for the frames around
+    (j + 1/2) * span (absolute time: the same for every length; rows sum to 1).
+
+    The decoder adds these mixtures of the latent tokens to its frame queries, and the
+    encoder adds the frames of each token's time span to that token's query: a short path
+    that makes the output vary over time from the first step, where cross-attention alone
+    starts by giving every frame the same average of the latent (a frozen pose).
+    """
+    centre = (torch.arange(num_steps, dtype=torch.float32) + 0.5) * frames_per_step
+    u = (centre / span - 0.5).clamp(0, num_tokens - 1)  # position on the token axis
+    j = torch.arange(num_tokens, dtype=torch.float32)
+    return (1.0 - (u[:, None] - j[None, :]).abs()).clamp_min(0.0)
+
+
+def unpatch_frames(tokens: Tensor, num_frames: int, k: int) -> Tensor:
+    """(B, N, k*D) tokens -> (B, num_frames, D) frames (the inverse of patch_frames)."""
+    b, n, kd = tokens.shape
+    return tokens.reshape(b, n * k, kd // k)[:, :num_frames]
 
 
 class MotionVAE(nn.Module):
@@ -117,8 +155,21 @@ class MotionVAE(nn.Module):
         d, p = cfg.d_model, cfg.num_tokens
         self.latent_dim = cfg.latent_dim if cfg.latent_adapter else d
         self.register_buffer("pos_table", sinusoidal_embedding(cfg.max_frames, d), persistent=False)
+        if cfg.target not in ("body", "global"):
+            raise ValueError(f"vae.target must be 'body' or 'global', got {cfg.target!r}")
+        if cfg.frames_per_token < 1:
+            raise ValueError(f"vae.frames_per_token must be >= 1, got {cfg.frames_per_token}")
+        self.body = cfg.target == "body"
+        self.space_dim = BODY_DIM if self.body else cfg.feature_dim
+        k = cfg.frames_per_token
+        # the statistics that map the normalised 262-d input into the VAE's own space
+        # (body frame: umf.body_frame); saved with the weights, set by set_normalizers
+        self.register_buffer("feature_mean", torch.zeros(FEATURE_DIM))
+        self.register_buffer("feature_std", torch.ones(FEATURE_DIM))
+        self.register_buffer("body_mean", torch.zeros(BODY_DIM))
+        self.register_buffer("body_std", torch.ones(BODY_DIM))
         # encoder
-        self.in_proj = nn.Linear(cfg.feature_dim, d)
+        self.in_proj = nn.Linear(k * self.space_dim, d)
         self.query_tokens = nn.Parameter(torch.randn(2 * p, d) * 0.02)  # p mu + p logvar
         self.encoder = SkipTransformer(cfg, cross=False)
         # the latent adapter (identity in the w/o-LA ablation: the latent is d wide)
@@ -126,8 +177,36 @@ class MotionVAE(nn.Module):
         # decoder
         self.latent_proj = nn.Linear(cfg.latent_dim, d) if cfg.latent_adapter else nn.Identity()
         self.token_pos = nn.Parameter(torch.randn(p, d) * 0.02)
+        span = cfg.token_span or cfg.max_frames / p  # frames per latent token
+        self.span = span if cfg.aligned_tokens else 0.0
         self.decoder = SkipTransformer(cfg, cross=True)
-        self.out_proj = nn.Linear(d, cfg.feature_dim)
+        self.out_proj = nn.Linear(d, k * self.space_dim)
+
+    def set_normalizers(self, features: Normalizer, body: Normalizer | None = None) -> None:
+        """The corpus normaliser of the 262-d input, and (body target) the body-frame one."""
+        self.feature_mean.copy_(features.mean)
+        self.feature_std.copy_(features.std)
+        if body is not None:
+            self.body_mean.copy_(body.mean)
+            self.body_std.copy_(body.std)
+
+    def to_space(self, x: Tensor) -> Tensor:
+        """Normalised 262-d features -> the normalised features the VAE models."""
+        if not self.body:
+            return x
+        raw = x * self.feature_std + self.feature_mean
+        return (to_body_frame(raw) - self.body_mean) / self.body_std
+
+    def from_space(self, y: Tensor) -> Tensor:
+        """The VAE's own normalised features -> normalised 262-d features (exact inverse)."""
+        if not self.body:
+            return y
+        raw = from_body_frame(y * self.body_std + self.body_mean)
+        return (raw - self.feature_mean) / self.feature_std
+
+    def _alignment(self, steps: int, like: Tensor) -> Tensor:
+        k, p = self.cfg.frames_per_token, self.cfg.num_tokens
+        return token_alignment(steps, k, p, self.span).to(like)
 
     @property
     def latent_shape(self) -> tuple[int, int]:
@@ -150,11 +229,20 @@ class MotionVAE(nn.Module):
         if x.dim() != 3 or x.shape[-1] != self.cfg.feature_dim:
             raise ValueError(f"expected x (B, T, {self.cfg.feature_dim}), got {tuple(x.shape)}")
         self._check_mask(mask, x.shape[0])
-        b, t, _ = x.shape
-        x = x.masked_fill(~mask[..., None], 0.0)  # NaN/inf in padding cannot leak as 0 * nan
-        frames = self.in_proj(x) + self.pos_table[:t]
-        h = torch.cat([self.query_tokens.expand(b, -1, -1), frames], dim=1)
-        pad = torch.cat([mask.new_zeros(b, self.query_tokens.shape[0]), ~mask], dim=1)
+        return self._encode_space(self.to_space(x.masked_fill(~mask[..., None], 0.0)), mask)
+
+    def _encode_space(self, y: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
+        b = y.shape[0]
+        # NaN/inf in padding cannot leak as 0 * nan: patch_frames zeroes padded frames
+        tokens_in, token_mask = patch_frames(y, mask, self.cfg.frames_per_token)
+        frames = self.in_proj(tokens_in) + self.pos_table[: tokens_in.shape[1]]
+        queries = self.query_tokens.expand(b, -1, -1)
+        if self.span:  # each token's query also sees the mean of its own time span
+            w = self._alignment(frames.shape[1], frames) * token_mask[..., None]  # (B, N, p)
+            pooled = w.transpose(1, 2) @ frames / w.sum(1)[..., None].clamp_min(1e-6)
+            queries = queries + pooled.repeat(1, 2, 1)  # the mu and the logvar token
+        h = torch.cat([queries, frames], dim=1)
+        pad = torch.cat([mask.new_zeros(b, self.query_tokens.shape[0]), ~token_mask], dim=1)
         tokens = self.adapter(self.encoder(h, pad)[:, : self.query_tokens.shape[0]])
         mu, logvar = tokens.chunk(2, dim=1)
         return mu, logvar
@@ -163,11 +251,18 @@ class MotionVAE(nn.Module):
         """z (B, p, r), mask (B, T) -> x_hat (B, T, 262); padded frames are unspecified."""
         if z.shape[1:] != self.latent_shape:
             raise ValueError(f"expected z (B, {self.latent_shape}), got {tuple(z.shape)}")
+        return self.from_space(self._decode_space(z, mask))
+
+    def _decode_space(self, z: Tensor, mask: Tensor) -> Tensor:
         self._check_mask(mask, z.shape[0])
         b, t = mask.shape
+        k = self.cfg.frames_per_token
+        token_mask = patch_frames(mask[..., None].float(), mask, k)[1]
         memory = self.latent_proj(z) + self.token_pos
-        queries = self.pos_table[:t].expand(b, -1, -1)
-        return self.out_proj(self.decoder(queries, ~mask, memory))
+        queries = self.pos_table[: token_mask.shape[1]].expand(b, -1, -1)
+        if self.span:
+            queries = queries + self._alignment(token_mask.shape[1], memory) @ memory
+        return unpatch_frames(self.out_proj(self.decoder(queries, ~token_mask, memory)), t, k)
 
     def forward(
         self,
@@ -176,9 +271,14 @@ class MotionVAE(nn.Module):
         sample: bool = True,
         generator: torch.Generator | None = None,
     ) -> VAEOutput:
-        mu, logvar = self.encode(x, mask)
+        if x.dim() != 3 or x.shape[-1] != self.cfg.feature_dim:
+            raise ValueError(f"expected x (B, T, {self.cfg.feature_dim}), got {tuple(x.shape)}")
+        self._check_mask(mask, x.shape[0])
+        y = self.to_space(x.masked_fill(~mask[..., None], 0.0))
+        mu, logvar = self._encode_space(y, mask)
         z = reparameterize(mu, logvar, generator) if sample else mu
-        return VAEOutput(self.decode(z, mask), mu, logvar, z)
+        y_hat = self._decode_space(z, mask)
+        return VAEOutput(self.from_space(y_hat), mu, logvar, z, y_hat, y)
 
 
 # --------------------------------------------------------------------- losses
@@ -189,9 +289,16 @@ def masked_mean(values: Tensor, mask: Tensor) -> Tensor:
     return (values * m).sum() / (m.sum() * per_frame).clamp_min(1.0)
 
 
-def reconstruction_loss(x_hat: Tensor, x: Tensor, mask: Tensor) -> Tensor:
-    """SmoothL1 on normalised features, all 262 dims, valid frames only."""
-    return masked_mean(F.smooth_l1_loss(x_hat, x, reduction="none"), mask)
+def reconstruction_loss(
+    x_hat: Tensor, x: Tensor, mask: Tensor, groups: Sequence[slice] | None = None
+) -> Tensor:
+    """SmoothL1 on normalised features, valid frames only: the mean over all dims, or with
+    ``groups`` the mean of the groups' means, so that 4 trajectory numbers weigh as much as
+    126 rotation numbers (otherwise where a body is and faces is almost free to get wrong)."""
+    err = F.smooth_l1_loss(x_hat, x, reduction="none")
+    if groups is None:
+        return masked_mean(err, mask)
+    return torch.stack([masked_mean(err[..., g], mask) for g in groups]).mean()
 
 
 def kl_loss(mu: Tensor, logvar: Tensor) -> Tensor:
@@ -301,7 +408,12 @@ def vae_losses(
         if weight != 0.0:
             terms[name], weights[name] = fn(), weight
 
-    add("recon", cfg.w_recon, lambda: reconstruction_loss(out.x_hat, x, mask))
+    # in the VAE's own space (body frame: the pose slots weigh the pose, not placement)
+    if out.y_hat is not None and out.y_hat.shape[-1] == BODY_DIM:
+        groups = list(BODY_GROUPS.values()) if cfg.group_balanced else None
+        add("recon", cfg.w_recon, lambda: reconstruction_loss(out.y_hat, out.y, mask, groups))
+    else:
+        add("recon", cfg.w_recon, lambda: reconstruction_loss(out.x_hat, x, mask))
     add("kl", cfg.w_kl, lambda: kl_loss(out.mu, out.logvar))
     geometric = (cfg.w_pos, cfg.w_vel, cfg.w_contact, cfg.w_bone, cfg.w_interaction)
     if any(w != 0.0 for w in geometric):

@@ -61,17 +61,21 @@ def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig
 
 
 def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=None,
-             progress: bool = True):  # fmt: skip
-    """(train, val) loaders of a stage.
+             progress: bool = True, stats_vae=None):  # fmt: skip
+    """(train, val, latents) of a stage.
 
     VAE and P-Flow alternate single-person and scene batches (SPEC 6), S-Flow sees scenes
     only. Only VAE training places people randomly (they may start anywhere, facing
     anywhere: SPEC 2); only training crops are mirrored. With ``vae`` given, the flows
-    train on a latent bank of ``t.latent_passes`` epochs of crops encoded once.
+    train on a latent bank of ``t.latent_passes`` epochs of crops encoded once. With
+    ``stats_vae`` given (a flow stage), ``latents`` (N, p, r) are the stage's training
+    latents (P-Flow: first people, S-Flow: everybody) for its latent normaliser: from the
+    bank, or one encoded epoch when training encodes per batch; else None.
     """
     from umf.train.latents import LatentBankDataset, build_bank
 
     frames = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
+    latents: list = []
 
     def loader(kind: str, split: str):
         train = split == "train"
@@ -82,17 +86,47 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                                      **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
+        bank = None
         if vae is not None:
             passes = t.latent_passes if train else 1
             bank = build_bank(vae, ds, passes, progress=progress, desc=f"latents {kind} {split}")
+        elif train and stats_vae is not None:
+            bank = build_bank(stats_vae, ds, 1, progress=progress, desc=f"latent stats {kind}")
+        if train and stats_vae is not None:
+            z, present = bank["z"], bank["people_mask"]
+            latents.append(z[:, 0] if stage == "pflow" else z[present])
+        if vae is not None:
             ds = LatentBankDataset(bank, first_person_only=(stage == "pflow"))
         return make_loader(ds, t.batch_size, shuffle=train, num_workers=t.num_workers,
                            seed=t.seed)  # fmt: skip
 
     if stage == "sflow":
-        return loader("scene", "train"), loader("scene", "val")
-    return (MixedBatches(loader("single", "train"), loader("scene", "train")),
-            MixedBatches(loader("single", "val"), loader("scene", "val")))  # fmt: skip
+        train, val = loader("scene", "train"), loader("scene", "val")
+    else:
+        train = MixedBatches(loader("single", "train"), loader("scene", "train"))
+        val = MixedBatches(loader("single", "val"), loader("scene", "val"))
+    return train, val, (torch.cat(latents) if latents else None)
+
+
+def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, seed: int = 0):
+    """Body-frame statistics (:func:`umf.body_frame.fit_body_normalizer`) of train clips.
+
+    Clips are visited in a seeded order until ``max_frames`` frames are seen; the
+    trajectory slots account for the random placement of VAE training within ``radius``.
+    """
+    import numpy as np
+
+    from umf.body_frame import fit_body_normalizer
+
+    clips = corpus.split_clips("train")
+    feats, seen = [], 0
+    for i in np.random.default_rng(seed).permutation(len(clips)):
+        f = torch.from_numpy(corpus.clip_features(clips[i]))
+        feats.append(f.reshape(-1, f.shape[-1]))
+        seen += feats[-1].shape[0]
+        if seen >= max_frames:
+            break
+    return fit_body_normalizer(torch.cat(feats), placement_radius=radius)
 
 
 def _load_frozen(path: Path, name: str, module: torch.nn.Module) -> None:
@@ -169,7 +203,10 @@ def train_stage(
     torch.manual_seed(t.seed)
     normalizer = corpus.normalizer
     if stage == "vae":
-        st: Any = VAEStage(cfg, normalizer)
+        from umf.train.datasets import PLACEMENT_RADIUS
+
+        body = body_normalizer(corpus, PLACEMENT_RADIUS) if cfg.vae.target == "body" else None
+        st: Any = VAEStage(cfg, normalizer, body_normalizer=body)
     else:
         vae = MotionVAE(cfg.vae)
         _load_frozen(best_or_last(run_dir / "vae"), "vae", vae)
@@ -185,7 +222,11 @@ def train_stage(
                 backbone = pflow.net
             st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed)
     bank_vae = st.vae if stage != "vae" and t.latent_passes > 0 else None
-    train_loader, val_loader = _loaders(stage, corpus, cfg, t, bank_vae, launch.progress)
+    stats_vae = st.vae if stage != "vae" else None
+    train_loader, val_loader, latents = _loaders(stage, corpus, cfg, t, bank_vae,
+                                                 launch.progress, stats_vae)  # fmt: skip
+    if latents is not None:  # a resumed run restores the same statistics from its checkpoint
+        st.trainable().latent_norm.fit(latents)
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
     return train(
         st, train_loader, val_loader, t, run_dir / stage,

@@ -41,10 +41,15 @@ def flatten_scenes(batch: dict[str, Any]) -> tuple[Tensor, Tensor, Tensor]:
     return rows, row_mask, people
 
 
-def mpjpe(x_hat: Tensor, x: Tensor, mask: Tensor, normalizer: Normalizer) -> Tensor:
-    """Mean per-joint position error (m) over valid frames."""
+def mpjpe(
+    x_hat: Tensor, x: Tensor, mask: Tensor, normalizer: Normalizer, root_relative: bool = False
+) -> Tensor:
+    """Mean per-joint position error (m) over valid frames; ``root_relative``: of the pose
+    (both skeletons' pelvises moved to the origin), which the root error cannot hide."""
     pred = normalizer.denormalize(x_hat)[..., POS].reshape(*x.shape[:2], 22, 3)
     true = normalizer.denormalize(x)[..., POS].reshape(*x.shape[:2], 22, 3)
+    if root_relative:
+        pred, true = pred - pred[..., :1, :], true - true[..., :1, :]
     err = (pred - true).norm(dim=-1).mean(-1)
     return (err * mask).sum() / mask.sum().clamp_min(1)
 
@@ -52,10 +57,17 @@ def mpjpe(x_hat: Tensor, x: Tensor, mask: Tensor, normalizer: Normalizer) -> Ten
 class VAEStage:
     name = "vae"
 
-    def __init__(self, config: UMFConfig, normalizer: Normalizer, vae: MotionVAE | None = None):
+    def __init__(
+        self,
+        config: UMFConfig,
+        normalizer: Normalizer,
+        vae: MotionVAE | None = None,
+        body_normalizer: Normalizer | None = None,
+    ):
         self.config = config
         self.normalizer = normalizer
         self.vae = vae or MotionVAE(config.vae)
+        self.vae.set_normalizers(normalizer, body_normalizer)
 
     def modules(self) -> dict[str, nn.Module]:
         return {"vae": self.vae}
@@ -81,6 +93,7 @@ class VAEStage:
         losses, x_hat, x, mask = self._losses(batch)
         out = {k: float(v) for k, v in losses.items()}
         out["mpjpe_m"] = float(mpjpe(x_hat, x, mask, self.normalizer))
+        out["mpjpe_pose_m"] = float(mpjpe(x_hat, x, mask, self.normalizer, root_relative=True))
         return out
 
 
