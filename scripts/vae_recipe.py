@@ -1,12 +1,15 @@
 """Score motion VAEs on reconstructions of real test clips (the VAE recipe table).
 
     python scripts/vae_recipe.py score NAME=VAE_DIR ... --corpus out/corpus --out results/vae-recipe
-    python scripts/vae_recipe.py train NAME --run ~/umf-runs/recipe --corpus out/corpus \
-        --steps 300 --set vae.target=global ...
+    python scripts/vae_recipe.py memorise --corpus out/corpus --set vae.w_pos=0.5 ...
+
+``memorise`` trains a fresh small VAE (``--set`` overrides) on one fixed batch of 32
+randomly placed training crops (one thread) and prints R^2 per body-frame group every 50
+steps: how fast a recipe can learn the pose at all.
 
 ``score`` takes model directories (``src/umf/assets/model``) or VAE stage directories of a
 run (``RUN/vae``), reconstructs every single-person test clip (posterior mean), and writes
-``recipe.json`` and ``README.md``: MPJPE (global, root-relative, wrists), R^2 per feature
+``recipe.json`` (one row per model, merged with earlier rows): MPJPE (global, root-relative, wrists), R^2 per feature
 group against the mean-pose baseline, the bundled single-person evaluator's FID and
 R-precision of the reconstructions (real clips scored the same way), and how high the
 reconstructed wrists of the real "raise both hands" clips get relative to the head.
@@ -107,6 +110,45 @@ def score(args: argparse.Namespace) -> None:
     table_path.write_text(json.dumps(table, indent=1))
 
 
+def memorise(args: argparse.Namespace) -> None:
+    from umf.body_frame import BODY_GROUPS
+    from umf.config import family_config, set_option
+    from umf.models.vae import vae_losses
+    from umf.train.datasets import PLACEMENT_RADIUS, SingleMotionDataset
+    from umf.train.run import body_normalizer
+
+    torch.set_num_threads(1)
+    torch.manual_seed(0)
+    cfg = family_config("small")
+    for o in args.set:
+        cfg = set_option(cfg, o)
+    corpus = Corpus.load(args.corpus)
+    ds = SingleMotionDataset(corpus, "train", corpus.normalizer, max_frames=120,
+                             random_placement=True)  # fmt: skip
+    batch = ds.collate([ds[i * 7] for i in range(32)])
+    x, m = batch["features"], batch["mask"]
+    vae = MotionVAE(cfg.vae)
+    vae.set_normalizers(corpus.normalizer,
+                        body_normalizer(corpus, PLACEMENT_RADIUS, max_frames=20_000))  # fmt: skip
+    opt = torch.optim.AdamW(vae.parameters(), lr=cfg.train_vae.lr)
+    for step in range(args.steps + 1):
+        losses = vae_losses(vae(x, m), x, m, corpus.normalizer, cfg.vae)
+        opt.zero_grad()
+        losses["total"].backward()
+        torch.nn.utils.clip_grad_norm_(vae.parameters(), 1.0)
+        opt.step()
+        if step % 50 == 0:
+            with torch.no_grad():
+                out = vae(x, m, sample=False)
+                y = out.y if out.y is not None else x
+                err, y = (out.y_hat - y)[m], y[m]
+            r2 = {}
+            for k, g in BODY_GROUPS.items():
+                sst = (y[:, g] - y[:, g].mean(0)).pow(2).sum()
+                r2[k] = round(1 - float(err[:, g].pow(2).sum() / sst), 3)
+            print(json.dumps({"step": step, "set": args.set, **r2}), flush=True)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     sub = ap.add_subparsers(dest="cmd", required=True)
@@ -115,8 +157,12 @@ def main() -> None:
     s.add_argument("--corpus", default="out/corpus")
     s.add_argument("--out", default="results/vae-recipe")
     s.add_argument("--threads", type=int, default=2)
+    m = sub.add_parser("memorise")
+    m.add_argument("--corpus", default="out/corpus")
+    m.add_argument("--steps", type=int, default=100)
+    m.add_argument("--set", action="append", default=[], help="config override a.b=value")
     args = ap.parse_args()
-    score(args)
+    (score if args.cmd == "score" else memorise)(args)
 
 
 if __name__ == "__main__":

@@ -89,11 +89,13 @@ class EvalPlan:
     speed_repeats: int = 5
     seed: int = 0
     examples: int = 3
+    motion_samples: int = 16  # generated people per label for the motion statistics (0: skip)
 
 
 QUICK = EvalPlan(
     quick=True, replications=2, mm_prompts=8, mm_samples=5, accumulation_sizes=(2, 3, 4),
     accumulation_prompts=4, pair_scenes=64, group_scenes=8, speed_repeats=2, length_step=15,
+    motion_samples=8,
 )  # fmt: skip
 
 
@@ -786,6 +788,72 @@ def speed_markdown(speed: dict[str, dict[str, Any]]) -> str:
     return head + "\n\n" + md_table(header, rows)
 
 
+def motion_section(corpus: Corpus, contenders: Sequence[Contender], plan: EvalPlan,
+                   log: Log) -> dict[str, Any]:  # fmt: skip
+    """Per-label body statistics of generated single people vs the real clips of that label
+    (:mod:`umf.eval.motion_stats`): what a person looking at the motion would check."""
+    from umf.eval import motion_stats as MS
+
+    real = MS.real_joints_by_label(corpus)
+    out: dict[str, Any] = {}
+    for c in contenders:
+
+        def generate(prompt: str, n: int, c: Contender = c) -> list[np.ndarray]:
+            prompts, frames = [prompt] * n, [120] * n
+            return c.generate(prompts, frames, 1, plan.seed, "motion statistics", _joints)
+
+        rows = MS.check_labels(real, lambda p, n: [j[0] for j in generate(p, n)],
+                               samples=plan.motion_samples)  # fmt: skip
+        passes = MS.label_passes(rows)
+        out[c.name] = {"checks": [dataclasses.asdict(r) for r in rows], "labels": passes,
+                       "passed": sum(passes.values()), "total": len(passes)}  # fmt: skip
+        log(f"{c.name}: motion statistics {sum(passes.values())}/{len(passes)} labels")
+    return out
+
+
+def reconstruction_section(corpus: Corpus, contenders: Sequence[Contender]) -> dict[str, Any]:
+    """VAE reconstructions of the real single-person test clips, per feature group
+    (:mod:`umf.eval.reconstruction`): what the flows can at best reach."""
+    from umf.eval.protocol import corpus_items
+    from umf.eval.reconstruction import reconstruct, reconstruction_metrics
+
+    items = corpus_items(corpus, "test", "single")
+    real = [it.features[0][: c.max_frames] for it in items for c in contenders[:1]]
+    out: dict[str, Any] = {}
+    for c in contenders:
+        rec = reconstruct(c.pipe.vae, c.pipe.normalizer, real)
+        out[c.name] = reconstruction_metrics(real, rec)
+    return out
+
+
+def motion_markdown(motion: dict[str, Any]) -> str:
+    from umf.eval.motion_stats import LabelCheck, format_checks
+
+    parts = []
+    for name, sec in motion.items():
+        rows = [LabelCheck(**{**r, "real_q": tuple(r["real_q"])}) for r in sec["checks"]]
+        parts += [f"**{name}**: {sec['passed']} of {sec['total']} labels within the real "
+                  "clips' interquartile range (widened by a quarter of it) on every "
+                  "statistic.", "", format_checks(rows), ""]  # fmt: skip
+    return "\n".join(parts)
+
+
+def reconstruction_markdown(rec: dict[str, Any]) -> str:
+    keys = [
+        "mpjpe_m",
+        "mpjpe_root_relative_m",
+        "wrist_error_m",
+        "r2_trajectory",
+        "r2_heading",
+        "r2_positions",
+        "r2_velocities",
+        "r2_rotations",
+        "r2_contacts",
+    ]
+    rows = [[k] + [fmt(rec[n][k]) for n in rec] for k in keys]
+    return md_table(["", *rec], rows)
+
+
 def render_markdown(results: dict[str, Any]) -> str:
     """report.md from the collected results (the same numbers as metrics.json)."""
     meta, sources = results["meta"], [s["name"] for s in results["sources"]]
@@ -829,10 +897,20 @@ def render_markdown(results: dict[str, Any]) -> str:
                 "table in `accumulation.csv`.", "",
                 accumulation_markdown(results["accumulation"]), "",
                 "![accumulation](accumulation.png)"]  # fmt: skip
-    out += ["", "## 5. Speed", "", speed_markdown(results["speed"]), ""]
+    if results.get("motion"):
+        out += ["", "## 5. Motion statistics per label (single person)", "",
+                "Generated from each label's prompt (4 s) and compared with the real clips "
+                "of that label (`umf.eval.motion_stats`); a mean pose fails them.", "",
+                motion_markdown(results["motion"])]  # fmt: skip
+    if results.get("reconstruction"):
+        out += ["", "## 6. VAE reconstruction of the real single-person test clips", "",
+                "Posterior means decoded; R² per feature group against the per-dimension "
+                "mean (1 perfect, 0 the mean pose; `umf.eval.reconstruction`).", "",
+                reconstruction_markdown(results["reconstruction"])]  # fmt: skip
+    out += ["", "## 7. Speed", "", speed_markdown(results["speed"]), ""]
     if results.get("examples"):
         out += [
-            "## 6. Examples",
+            "## 8. Examples",
             "",
             f"Generated by {meta['model']}: " + "; ".join(results["examples"]) + ".",
             "",
@@ -904,6 +982,8 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
     relations, physics = relations_section(sets), physics_section(sets)
     table = accumulation_section(corpus, contenders, plan, log)
     prompt = next((s.records[0]["captions"][0] for s in sets), "two people bow to each other")
+    motion = motion_section(corpus, contenders, plan, log) if plan.motion_samples else {}
+    reconstruction = reconstruction_section(corpus, contenders)
     speed = {c.name: speed_section(c, prompt, plan.speed_repeats, plan.seed) for c in contenders}
     if plan.mm_prompts and evaluators:
         notes.append(f"MModality: {plan.mm_prompts} prompts x {plan.mm_samples} samples = "
@@ -937,6 +1017,8 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
         "physics": physics,
         "accumulation": table,
         "accumulation_prompts": accumulation_prompts(corpus, plan.accumulation_prompts),
+        "motion": motion,
+        "reconstruction": reconstruction,
         "speed": speed,
         "examples": examples,
     }  # fmt: skip
