@@ -9,10 +9,11 @@ steps: how fast a recipe can learn the pose at all.
 
 ``score`` takes model directories (``src/umf/assets/model``) or VAE stage directories of a
 run (``RUN/vae``), reconstructs every single-person test clip (posterior mean), and writes
-``recipe.json`` (one row per model, merged with earlier rows): MPJPE (global, root-relative, wrists), R^2 per feature
-group against the mean-pose baseline, the bundled single-person evaluator's FID and
-R-precision of the reconstructions (real clips scored the same way), and how high the
-reconstructed wrists of the real "raise both hands" clips get relative to the head.
+``recipe.json`` (one row per model, merged with earlier rows): MPJPE (global,
+root-relative, wrists), R^2 per feature group against the mean-pose baseline, the bundled
+single-person evaluator's FID and R-precision of the reconstructions (real clips scored
+the same way), and how high the reconstructed wrists of the real "raise both hands" clips
+get relative to the head.
 """
 
 from __future__ import annotations
@@ -111,7 +112,7 @@ def score(args: argparse.Namespace) -> None:
 
 
 def memorise(args: argparse.Namespace) -> None:
-    from umf.body_frame import BODY_GROUPS
+    from umf.body_frame import BODY_GROUPS, to_body_frame
     from umf.config import family_config, set_option
     from umf.models.vae import vae_losses
     from umf.train.datasets import PLACEMENT_RADIUS, SingleMotionDataset
@@ -128,8 +129,12 @@ def memorise(args: argparse.Namespace) -> None:
     batch = ds.collate([ds[i * 7] for i in range(32)])
     x, m = batch["features"], batch["mask"]
     vae = MotionVAE(cfg.vae)
-    vae.set_normalizers(corpus.normalizer,
-                        body_normalizer(corpus, PLACEMENT_RADIUS, max_frames=20_000))  # fmt: skip
+    body = body_normalizer(corpus, PLACEMENT_RADIUS, max_frames=20_000)
+    vae.set_normalizers(corpus.normalizer, body)
+
+    def body_space(feats: torch.Tensor) -> torch.Tensor:
+        return body.normalize(to_body_frame(corpus.normalizer.denormalize(feats)))
+
     opt = torch.optim.AdamW(vae.parameters(), lr=cfg.train_vae.lr)
     for step in range(args.steps + 1):
         losses = vae_losses(vae(x, m), x, m, corpus.normalizer, cfg.vae)
@@ -138,10 +143,10 @@ def memorise(args: argparse.Namespace) -> None:
         torch.nn.utils.clip_grad_norm_(vae.parameters(), 1.0)
         opt.step()
         if step % 50 == 0:
-            with torch.no_grad():
+            with torch.no_grad():  # scored in the body frame whatever the VAE models
                 out = vae(x, m, sample=False)
-                y = out.y if out.y is not None else x
-                err, y = (out.y_hat - y)[m], y[m]
+                y, y_hat = body_space(x), body_space(out.x_hat)
+                err, y = (y_hat - y)[m], y[m]
             r2 = {}
             for k, g in BODY_GROUPS.items():
                 sst = (y[:, g] - y[:, g].mean(0)).pow(2).sum()
