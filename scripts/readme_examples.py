@@ -16,6 +16,9 @@ EXAMPLES = [
     # (file name, prompt, people, seconds): wordings the training captions use
     ("walk", "A person walks forward.", 1, 4.0),
     ("wave", "Someone waves with the right hand.", 1, 4.0),
+    ("raise_hands", "A person raises both hands.", 1, 4.0),
+    ("bow", "Someone bows politely.", 1, 4.0),
+    ("run", "A person runs forward.", 1, 4.0),
     ("bow_back", "One person bows and the other bows back.", 2, 4.0),
     ("walk_side_by_side", "Two people walk side by side.", 2, 4.0),
     ("step_back", "One person kicks and the other steps back.", 2, 4.0),

@@ -78,15 +78,17 @@ def protocol(evaluator, items, recon, replications: int = 5) -> dict[str, float]
 
 
 def score(args: argparse.Namespace) -> None:
-    from umf.eval.report import load_evaluators
+    from umf.eval.report import default_evaluator_dir, load_evaluators
 
     torch.set_num_threads(args.threads)
     corpus = Corpus.load(args.corpus)
     norm = corpus.normalizer
     items = corpus_items(corpus, "test", "single")
-    real = [it.features[0] for it in items]
+    real = [it.features[0][:300] for it in items]  # the longest motion the VAEs decode
     raise_idx = [i for i, it in enumerate(items) if "raise-up-both-hands" in it.id]
-    evaluator = load_evaluators(None, corpus.root / "text-cache", "cpu")["single"]
+    evaluator = load_evaluators(default_evaluator_dir(), corpus.root / "text-cache", "cpu")[
+        "single"
+    ]
     out_dir = Path(args.out)
     out_dir.mkdir(parents=True, exist_ok=True)
     table_path = out_dir / "recipe.json"
