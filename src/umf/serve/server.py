@@ -50,12 +50,15 @@ _TYPES = {".js": "text/javascript", ".mjs": "text/javascript", ".glb": "model/gl
 
 # ------------------------------------------------------------------ three.js
 def three_candidates() -> list[Path]:
-    """Where the npm package ``three`` may be: $UMF_THREE_DIR, then the venv's node folder
-    (what ``make install`` fills), then ./.venv/node and ./node_modules."""
-    found = [Path(os.environ["UMF_THREE_DIR"])] if os.environ.get("UMF_THREE_DIR") else []
-    return [*found, Path(sys.prefix) / "node" / "node_modules" / "three",
-            Path.cwd() / ".venv" / "node" / "node_modules" / "three",
-            Path.cwd() / "node_modules" / "three"]  # fmt: skip
+    """Where the npm package ``three`` may be: $UMF_THREE_DIR alone when set, else the
+    venv's node folder (what ``make install`` fills), then ./.venv/node and ./node_modules."""
+    if os.environ.get("UMF_THREE_DIR"):
+        return [Path(os.environ["UMF_THREE_DIR"])]
+    return [
+        Path(sys.prefix) / "node" / "node_modules" / "three",
+        Path.cwd() / ".venv" / "node" / "node_modules" / "three",
+        Path.cwd() / "node_modules" / "three",
+    ]
 
 
 def find_three() -> Path | None:
