@@ -78,12 +78,19 @@ class ModelHolder:
             if self._loader is None:
                 raise UMFError("no model to load")
             self._pipeline = self._loader()
+            self._warm_up(self._pipeline)
         except UMFError as exc:
             self._error = str(exc)
         except Exception as exc:  # a broken install: report it, never a traceback
             self._error = f"the model could not be loaded ({type(exc).__name__}: {exc})"[:300]
         self.load_seconds = round(time.perf_counter() - begin, 2)
         self._ready.set()
+
+    @staticmethod
+    def _warm_up(pipeline: Any) -> None:
+        """One tiny scene while the user is still typing: torch's first calls are slow
+        (allocations, kernel choice), and the first click should not pay for them."""
+        pipeline(["warm up"], num_people=2, seconds=1.0, seed=0)
 
     def get(self, timeout: float = MODEL_WAIT_S) -> Any:
         """The loaded pipeline; a RequestError (503) if it failed or is still loading."""

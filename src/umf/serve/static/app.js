@@ -30,7 +30,7 @@ const sleep = (ms) => new Promise((resolve) => setTimeout(resolve, ms));
 async function watchGeneration(pending) {
   const begin = performance.now();
   let done = false;
-  pending.finally(() => { done = true; });
+  pending.then(() => { done = true; }, () => { done = true; }); // generate() reports errors
   while (!done) {
     const seconds = ((performance.now() - begin) / 1000).toFixed(1);
     try {
@@ -226,6 +226,7 @@ async function start() {
     if (scenes.length) await show(scenes[scenes.length - 1]);
     const model = health.model.state === "ready" ? `model ${health.model.name} ready`
       : health.model.state === "error" ? `model error: ${health.model.error}`
+      : health.model.state === "idle" ? "the model loads when you first generate"
       : "the model loads in the background";
     setStatus(`Type a prompt and press Generate (${model}).`, { error: health.model.state === "error" });
   } catch (error) {
