@@ -46,6 +46,10 @@ def _missing() -> str | None:
 @pytest.fixture(scope="module")
 def served():
     """`umf serve --port 0` as a user starts it; yields its URL (read from its first line)."""
+    reason = _missing()
+    if reason:
+        print(f"skipping the browser test: {reason}")
+        pytest.skip(reason)
     env = {**os.environ, "OMP_NUM_THREADS": "1", "PYTHONUNBUFFERED": "1"}
     proc = subprocess.Popen(
         [sys.executable, "-m", "umf.cli.main", "serve", "--port", "0", "--no-open"],
@@ -63,10 +67,6 @@ def served():
 @pytest.fixture(scope="module")
 def browsed(served, tmp_path_factory):
     """Run the browser driver once; its snapshots, download and result.json."""
-    reason = _missing()
-    if reason:
-        print(f"skipping the browser test: {reason}")
-        pytest.skip(reason)
     out = tmp_path_factory.mktemp("browser")
     env = {**os.environ, "PLAYWRIGHT_CORE": str(PLAYWRIGHT), "CHROMIUM": str(CHROMIUM)}
     r = subprocess.run(["node", str(DRIVER), served, str(out)], capture_output=True, text=True,
