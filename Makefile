@@ -9,15 +9,17 @@ OUT    ?= out
 # Full Bandai archives when present (../shared), else the bundled sample clips.
 BANDAI ?= $(firstword $(wildcard ../shared/data/bandai) data/bandai-sample)
 
-.PHONY: install demo test test-slow bench lint format corpus clean
+.PHONY: install demo serve test test-slow bench lint format corpus clean
 
 $(STAMP): pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/pip install --quiet torch==2.13.0
 	$(BIN)/pip install --quiet -c requirements.lock -e ".[train,dev]"
-	@# the Khronos glTF validator for the GLB export test (skipped when npm is absent)
+	@# from npm: three.js for `umf serve`; the Khronos glTF validator and playwright-core
+	@# (drives Debian's chromium, never downloads a browser) for the tests, which skip
+	@# without them
 	-command -v npm >/dev/null && npm install --silent --no-audit --no-fund \
-		--prefix $(VENV)/node gltf-validator@2.0.0-dev.3.10
+		--prefix $(VENV)/node three@0.187.0 gltf-validator@2.0.0-dev.3.10 playwright-core@1.65.1
 	touch $(STAMP)
 
 install: $(STAMP)
@@ -30,6 +32,10 @@ demo: $(STAMP)
 	$(BIN)/umf react "two people bow to each other" --people 2 --seed 0 \
 		--actor data/bandai-sample/Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh \
 		--format npz,gif,glb --out $(OUT)/demo
+
+# The web page: generate scenes and play them in 3-D at http://localhost:8000/
+serve: $(STAMP)
+	$(BIN)/umf serve
 
 test: $(STAMP)
 	$(BIN)/python -m pytest -q -m "not slow"

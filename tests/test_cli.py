@@ -19,7 +19,8 @@ def umf(*args: str, cwd=None) -> subprocess.CompletedProcess:
 def test_help_everywhere():
     for args in ([], ["data"], ["data", "prepare"], ["data", "show"], ["data", "info"],
                  ["train"], ["train", "vae"], ["train", "all"], ["train", "export"],
-                 ["train", "evaluator"], ["generate"], ["react"], ["eval"]):  # fmt: skip
+                 ["train", "evaluator"], ["generate"], ["react"], ["eval"], ["serve"],
+                 ["view"]):  # fmt: skip
         r = umf(*args, "--help")
         assert r.returncode == 0, r.stderr
         assert "Usage" in r.stdout

@@ -16,7 +16,7 @@ from __future__ import annotations
 import itertools
 import math
 import textwrap
-from collections.abc import Iterator, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from fractions import Fraction
 from pathlib import Path
 from typing import Any
@@ -380,9 +380,18 @@ class _Scene:
         self.close()
 
 
-def _frames(scene: _Scene, indices: Sequence[int], progress: bool, desc: str) -> Iterator[Any]:
-    for t in tqdm(indices, desc=desc, unit="frame", disable=not progress, leave=False):
+def _frames(
+    scene: _Scene,
+    indices: Sequence[int],
+    progress: bool,
+    desc: str,
+    on_frame: Callable[[int, int], None] | None = None,
+) -> Iterator[Any]:
+    for done, t in enumerate(tqdm(indices, desc=desc, unit="frame", disable=not progress,
+                                  leave=False), start=1):  # fmt: skip
         yield scene.draw(t)
+        if on_frame is not None:
+            on_frame(done, len(indices))
 
 
 # ----------------------------------------------------------------- writers
@@ -517,12 +526,14 @@ def render_animation(
     progress: bool = True,
     max_frames: int | None = None,
     stride: int = 1,
+    on_frame: Callable[[int, int], None] | None = None,
 ) -> Path:
     """Write an animation of ``joints`` (P, T, 22, 3) or (T, 22, 3) to ``path``; return it.
 
     ``.gif`` loops forever, ``.mp4`` is H.264 / yuv420p (plays in browsers; an odd
     frame size is rounded up to even). Playback is real time: with ``stride`` k every
-    k-th frame is shown for k / ``fps`` seconds. Written atomically.
+    k-th frame is shown for k / ``fps`` seconds. Written atomically. ``on_frame(done,
+    total)`` is called after each drawn frame, so a caller (``umf serve``) can show progress.
     """
     path = Path(path)
     suffix = path.suffix.lower()
@@ -545,7 +556,7 @@ def render_animation(
         ) as scene,
         atomic_path(path) as tmp,
     ):
-        frames = _frames(scene, indices, progress, f"render {path.name}")
+        frames = _frames(scene, indices, progress, f"render {path.name}", on_frame)
         if suffix == ".gif":
             _write_gif(frames, tmp, _gif_durations(len(indices), stride / scene.fps))
         else:

@@ -93,12 +93,19 @@ def generate(
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
     out: Path = typer.Option(Path("out/generate"), help="Output directory."),
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
+    view: bool = typer.Option(False, "--view", help="Then play the scenes in the 3-D page."),
+    port: int = typer.Option(8000, help="Port of the --view page (0: any free port)."),
 ) -> None:
     """Generate synchronized motion for N people from text."""
     wanted = parse_formats(formats)
     texts = _read_prompts(prompt, prompts)
     step_list = parse_steps(steps)
     _check_batch(batch)
+    if view:  # before the work: say at once when the page cannot be shown
+        from umf.serve.server import find_three, three_missing_message
+
+        if find_three() is None:
+            raise UMFError(three_missing_message())
     pipe = load_pipeline(model)
     jobs = [(k, text, j) for k, text in enumerate(texts) for j in range(batch)]
     scenes = pipe([text for _, text, _ in jobs], num_people=people, seconds=seconds, seed=seed,
@@ -107,6 +114,11 @@ def generate(
         stem = out / f"{k:02d}-{_slug(text)}" if batch == 1 else out / f"{k:02d}-{_slug(text)}-{j}"
         for path in write_scene(scene, stem, wanted):
             typer.echo(f"wrote {path}")
+    if view:
+        from umf.cli.serve import view_scenes
+
+        params = {"seed": seed, "guidance": guidance, "steps": step_list}
+        view_scenes(scenes, pipe, params | {"sflow_steps": sflow_steps}, port)
 
 
 def react(

@@ -10,6 +10,7 @@ from umf import __version__
 from umf.cli.data import app as data_app
 from umf.cli.eval import evaluate
 from umf.cli.generate import generate, react
+from umf.cli.serve import serve, view
 from umf.cli.train import app as train_app
 from umf.errors import UMFError
 
@@ -25,6 +26,8 @@ app.add_typer(train_app, name="train")
 app.command("generate")(generate)
 app.command("react")(react)
 app.command("eval")(evaluate)
+app.command("serve")(serve)
+app.command("view")(view)
 
 
 def _version(value: bool) -> None:

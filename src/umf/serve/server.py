@@ -1,0 +1,372 @@
+"""`umf serve`: a local web page and JSON API that generate scenes and play them in 3-D.
+
+Standard library only (``ThreadingHTTPServer``): the page is a few static files of this
+package, three.js is served from the npm package ``make install`` put beside the venv, and
+the model is loaded once in a background thread. Routes:
+
+- ``GET /`` the page; ``GET /static/*`` its files; ``GET /vendor/three/*`` three.js;
+- ``GET /api/health``; ``POST /api/generate`` (JSON, the CLI's fields); ``GET /api/scenes``
+  and ``GET /api/scenes/ID``; ``POST /api/upload?name=F.bvh`` (react mode's actor);
+  ``POST``/``GET /api/scenes/ID/mp4`` (encode the MP4 in the background / its progress);
+- ``GET /files/ID/NAME`` a scene's GLB, NPZ, BVH zip or MP4.
+
+Every error is a JSON ``{"error": "one line"}`` with a 4xx status (5xx for the server's
+own failures, whose traceback goes to the server's stderr, never to the client).
+"""
+
+from __future__ import annotations
+
+import ipaddress
+import json
+import mimetypes
+import os
+import sys
+import tempfile
+import threading
+import time
+import traceback
+from collections.abc import Callable
+from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
+from pathlib import Path
+from typing import Any
+from urllib.parse import parse_qs, unquote, urlsplit
+
+import numpy as np
+
+from umf import __version__
+from umf.errors import UMFError
+from umf.serve.scenes import BUSY_WAIT_S, ActorStore, ModelHolder, SceneRecord, SceneStore
+from umf.serve.validate import GenerateRequest, RequestError, parse_generate
+
+THREE_VERSION = "0.187.0"
+STATIC = Path(__file__).parent / "static"
+MAX_JSON_BYTES = 64 * 1024
+MAX_UPLOAD_BYTES = 20 * 1024 * 1024
+READ_TIMEOUT_S = 30.0
+MOTION_SUFFIXES = (".bvh", ".npz")
+_TYPES = {".js": "text/javascript", ".mjs": "text/javascript", ".glb": "model/gltf-binary",
+          ".npz": "application/octet-stream", ".bvh": "text/plain", ".css": "text/css"}  # fmt: skip
+
+
+# ------------------------------------------------------------------ three.js
+def three_candidates() -> list[Path]:
+    """Where the npm package ``three`` may be: $UMF_THREE_DIR alone when set, else the
+    venv's node folder (what ``make install`` fills), then ./.venv/node and ./node_modules."""
+    if os.environ.get("UMF_THREE_DIR"):
+        return [Path(os.environ["UMF_THREE_DIR"])]
+    return [
+        Path(sys.prefix) / "node" / "node_modules" / "three",
+        Path.cwd() / ".venv" / "node" / "node_modules" / "three",
+        Path.cwd() / "node_modules" / "three",
+    ]
+
+
+def find_three() -> Path | None:
+    return next((p for p in three_candidates() if (p / "build" / "three.module.js").is_file()),
+                None)  # fmt: skip
+
+
+def three_missing_message() -> str:
+    node = Path(sys.prefix) / "node"
+    return (
+        f"three.js is missing: run `make install`, or `npm install --prefix {node} "
+        f"three@{THREE_VERSION}` (or set UMF_THREE_DIR)"
+    )
+
+
+# ------------------------------------------------------------------ the application
+class App:
+    """State shared by all requests: model, scenes, uploads, where three.js is."""
+
+    def __init__(self, model: ModelHolder, three: Path | None, workdir: Path | None = None,
+                 verbose: bool = False) -> None:  # fmt: skip
+        self.model = model
+        self.three = three
+        self._tmp = None if workdir else tempfile.TemporaryDirectory(prefix="umf-serve-")
+        self.workdir = workdir or Path(self._tmp.name)
+        self.scenes = SceneStore(self.workdir / "scenes")
+        self.actors = ActorStore()
+        self.verbose = verbose
+
+    def close(self) -> None:
+        if self._tmp is not None:
+            self._tmp.cleanup()
+
+    def health(self) -> dict[str, Any]:
+        return {"status": "ok", "version": __version__, "model": self.model.info(),
+                "busy": self.model.generating.locked(), "three": self.three is not None,
+                "scenes": len(self.scenes.all())}  # fmt: skip
+
+    def generate(self, req: GenerateRequest) -> dict[str, Any]:
+        pipe = self.model.get()
+        actor = self._actor_window(req, pipe) if req.actor else None
+        if not self.model.generating.acquire(timeout=BUSY_WAIT_S):
+            raise RequestError("the server is busy with another scene; try again", 503)
+        begin = time.perf_counter()
+        try:
+            scene = pipe([req.prompt], num_people=req.people, seconds=req.seconds, seed=req.seed,
+                         guidance=req.guidance, pflow_steps=req.steps,
+                         sflow_steps=req.sflow_steps, actor=actor)[0]  # fmt: skip
+        except UMFError as exc:
+            raise RequestError(str(exc)) from None
+        finally:
+            self.model.generating.release()
+        params = {"seed": req.seed, "guidance": req.guidance, "steps": req.steps,
+                  "sflow_steps": req.sflow_steps, "actor": req.actor,
+                  "generate_seconds": round(time.perf_counter() - begin, 3)}  # fmt: skip
+        record = self.scenes.add_scene(scene, params)
+        return scene_json(record, req.joints)
+
+    def _actor_window(self, req: GenerateRequest, pipe: Any) -> np.ndarray:
+        """Person ``actor_person`` of the upload, from ``start`` for ``seconds`` (capped at
+        the model's longest motion): what `umf react` does with --start/--seconds."""
+        from umf.data.motion_file import FPS
+
+        motion = self.actors.get(req.actor)
+        if req.actor_person > motion.num_people:
+            raise RequestError(f"the uploaded motion has {motion.num_people} people, "
+                               f"no person {req.actor_person}")  # fmt: skip
+        joints = motion.joints[req.actor_person - 1]
+        first = round(req.start * FPS)
+        if first >= joints.shape[0]:
+            raise RequestError(f"'start' {req.start:g} s is outside the uploaded motion "
+                               f"({joints.shape[0] / FPS:.1f} s)")  # fmt: skip
+        count = min(round(req.seconds * FPS) + 1, pipe.config.vae.max_frames + 1)
+        return joints[first : first + count]
+
+    def upload(self, name: str, data: bytes) -> dict[str, Any]:
+        """An actor motion (.bvh/.npz) read by ``load_motion``; returns its id for react."""
+        from umf.data.motion_file import FPS, load_motion
+
+        suffix = Path(name).suffix.lower()
+        if suffix not in MOTION_SUFFIXES:
+            raise RequestError("upload a .bvh or .npz motion file (?name=FILE.bvh)", 415)
+        folder = self.workdir / "uploads"
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, tmp = tempfile.mkstemp(suffix=suffix, dir=folder)
+        try:
+            with os.fdopen(fd, "wb") as fh:
+                fh.write(data)
+            motion = load_motion(tmp)
+        except UMFError as exc:
+            raise RequestError(str(exc).replace(tmp, Path(name).name)) from None
+        except Exception as exc:  # a parser failing on garbage is still the file's fault
+            raise RequestError(f"{Path(name).name}: not a readable motion file "
+                               f"({type(exc).__name__})") from None  # fmt: skip
+        finally:
+            Path(tmp).unlink(missing_ok=True)
+        aid = self.actors.add(motion)
+        return {"actor": aid, "name": Path(name).name, "people": motion.num_people,
+                "frames": motion.num_frames, "seconds": round(motion.num_frames / FPS, 3),
+                "text": motion.text}  # fmt: skip
+
+
+def scene_json(record: SceneRecord, with_joints: bool = True) -> dict[str, Any]:
+    """The API's view of a scene: parameters, file links and the joints (mm precision)."""
+    out = record.summary()
+    if with_joints and record.joints is not None:
+        out["joints"] = np.round(record.joints.astype(np.float64), 3).tolist()
+    return out
+
+
+# ------------------------------------------------------------------ HTTP
+class Handler(BaseHTTPRequestHandler):
+    """Routes of the module docstring; every response is complete and bounded."""
+
+    server_version = f"umf/{__version__}"
+    timeout = READ_TIMEOUT_S  # a client that stops sending is dropped
+    app: App  # set on the subclass made by make_server
+
+    def log_message(self, format: str, *args: Any) -> None:
+        if self.app.verbose:
+            sys.stderr.write(f"umf serve: {self.address_string()} {format % args}\n")
+
+    # -- dispatch
+    def do_GET(self) -> None:
+        self._dispatch("GET")
+
+    def do_POST(self) -> None:
+        self._dispatch("POST")
+
+    def do_PUT(self) -> None:
+        self._dispatch("PUT")
+
+    def do_DELETE(self) -> None:
+        self._dispatch("DELETE")
+
+    def _dispatch(self, method: str) -> None:
+        try:
+            self._check_host()
+            path = urlsplit(self.path).path
+            route = self._route(method, path)
+            if route is None:
+                raise RequestError(f"no such page: {method} {path}", 404)
+            route()
+        except RequestError as exc:
+            self._json({"error": str(exc)}, exc.status)
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
+            self.close_connection = True
+        except Exception as exc:  # the server's own failure: log it, tell the client one line
+            traceback.print_exc(file=sys.stderr)
+            self._json({"error": f"internal error ({type(exc).__name__}); see the server log"},
+                       500)  # fmt: skip
+
+    def _route(self, method: str, path: str) -> Callable[[], None] | None:
+        parts = [unquote(p) for p in path.strip("/").split("/")] if path != "/" else []
+        gets: dict[tuple[str, ...], Callable[[], None]] = {
+            (): lambda: self._file(STATIC / "index.html"),
+            ("api", "health"): lambda: self._json(self.app.health()),
+            ("api", "scenes"): lambda: self._json(
+                {"scenes": [r.summary() for r in self.app.scenes.all()]}),
+        }  # fmt: skip
+        posts: dict[tuple[str, ...], Callable[[], None]] = {
+            ("api", "generate"): self._post_generate,
+            ("api", "upload"): self._post_upload,
+        }
+        table = gets if method == "GET" else posts if method == "POST" else {}
+        if tuple(parts) in table:
+            return table[tuple(parts)]
+        if method == "GET" and len(parts) == 2 and parts[0] == "static":
+            return lambda: self._static(parts[1])
+        if method == "GET" and len(parts) >= 3 and parts[:2] == ["vendor", "three"]:
+            return lambda: self._three(parts[2:])
+        if method == "GET" and len(parts) == 3 and parts[0] == "files":
+            return lambda: self._scene_file(parts[1], parts[2])
+        if len(parts) == 3 and parts[:2] == ["api", "scenes"] and method == "GET":
+            return lambda: self._json(scene_json(self.app.scenes.get(parts[2])))
+        if len(parts) == 4 and parts[:2] == ["api", "scenes"] and parts[3] == "mp4":
+            if method in ("GET", "POST"):
+                return lambda: self._video(parts[2], start=method == "POST")
+        mp4 = len(parts) == 4 and parts[:2] == ["api", "scenes"] and parts[3] == "mp4"
+        if mp4 or any(tuple(parts) in t for t in (gets, posts)):
+            return lambda: self._wrong_method(method)
+        return None
+
+    def _wrong_method(self, method: str) -> None:
+        raise RequestError(f"{method} is not allowed here", 405)
+
+    def _check_host(self) -> None:
+        """On a loopback address only loopback Host names are served, so a web page
+        elsewhere cannot reach the server through DNS rebinding."""
+        host = self.server.server_address[0]
+        if not _is_loopback(host):
+            return
+        name = (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]").lower()
+        if name not in ("localhost", "127.0.0.1", "::1", "") and not _is_loopback(name):
+            raise RequestError(f"host {name!r} not allowed", 403)
+
+    # -- bodies
+    def _body(self, limit: int) -> bytes:
+        length = self.headers.get("Content-Length")
+        if length is None:
+            raise RequestError("a Content-Length header is required", 411)
+        try:
+            size = int(length)
+        except ValueError:
+            raise RequestError("bad Content-Length header") from None
+        if size < 0:
+            raise RequestError("bad Content-Length header")
+        if size > limit:
+            self.close_connection = True  # the rest of the body is not read
+            raise RequestError(f"the request body is larger than {limit} bytes", 413)
+        data = self.rfile.read(size)
+        if len(data) != size:
+            raise RequestError("the request body ended early")
+        return data
+
+    def _json_body(self) -> Any:
+        kind = (self.headers.get("Content-Type") or "application/json").split(";")[0].strip()
+        if kind != "application/json":
+            raise RequestError("send the fields as JSON (Content-Type: application/json)", 415)
+        data = self._body(MAX_JSON_BYTES)
+        try:
+            return json.loads(data.decode("utf-8"))
+        except (UnicodeDecodeError, ValueError):
+            raise RequestError("the request body is not valid JSON") from None
+
+    def _post_generate(self) -> None:
+        request = parse_generate(self._json_body())
+        self._json(self.app.generate(request))
+
+    def _post_upload(self) -> None:
+        query = parse_qs(urlsplit(self.path).query)
+        name = (query.get("name") or [""])[0]
+        if not name:
+            raise RequestError("name the file: POST /api/upload?name=FILE.bvh")
+        self._json(self.app.upload(name, self._body(MAX_UPLOAD_BYTES)))
+
+    def _video(self, sid: str, start: bool) -> None:
+        record = self.app.scenes.get(sid)
+        video = self.app.scenes.start_video(record) if start else record.video
+        out = {"state": video.state, "done": video.done, "total": video.total,
+               "error": video.error}  # fmt: skip
+        if video.state == "done":
+            out["url"] = f"/files/{sid}/{record.files['mp4']}"
+        self._json(out, 202 if start and video.state == "running" else 200)
+
+    # -- files
+    def _static(self, name: str) -> None:
+        path = STATIC / name
+        if "/" in name or name.startswith(".") or not path.is_file():
+            raise RequestError(f"no such file: {name}", 404)
+        self._file(path)
+
+    def _three(self, parts: list[str]) -> None:
+        three = self.app.three
+        if three is None:
+            raise RequestError(three_missing_message(), 404)
+        path = (three / "/".join(parts)).resolve()
+        allowed = [(three / "build").resolve(), (three / "examples" / "jsm").resolve()]
+        inside = any(path.is_relative_to(a) for a in allowed)
+        if not inside or path.suffix != ".js" or not path.is_file():
+            raise RequestError(f"no such three.js file: {'/'.join(parts)}", 404)
+        self._file(path, cache=True)
+
+    def _scene_file(self, sid: str, name: str) -> None:
+        record = self.app.scenes.get(sid)
+        if name not in record.files.values():
+            raise RequestError(f"scene {sid} has no file {name!r}", 404)
+        self._file(record.folder / name, download=name)
+
+    def _file(self, path: Path, cache: bool = False, download: str | None = None) -> None:
+        data = path.read_bytes()
+        kind = _TYPES.get(path.suffix.lower()) or mimetypes.guess_type(path.name)[0]
+        self.send_response(200)
+        self.send_header("Content-Type", kind or "application/octet-stream")
+        self.send_header("Content-Length", str(len(data)))
+        self.send_header("Cache-Control", "max-age=3600" if cache else "no-cache")
+        if download:
+            self.send_header("Content-Disposition", f'attachment; filename="{download}"')
+        self.end_headers()
+        self.wfile.write(data)
+
+    def _json(self, obj: Any, status: int = 200) -> None:
+        data = json.dumps(obj, separators=(",", ":")).encode()
+        self.send_response(status)
+        self.send_header("Content-Type", "application/json")
+        self.send_header("Content-Length", str(len(data)))
+        self.send_header("Cache-Control", "no-cache")
+        self.end_headers()
+        self.wfile.write(data)
+
+
+def _is_loopback(host: str) -> bool:
+    try:
+        return ipaddress.ip_address(host).is_loopback
+    except ValueError:
+        return host == "localhost"
+
+
+def make_server(app: App, host: str = "127.0.0.1", port: int = 8000) -> ThreadingHTTPServer:
+    """A server bound to ``host:port`` (port 0: a free one) serving ``app``."""
+    handler = type("UMFHandler", (Handler,), {"app": app})
+    server = ThreadingHTTPServer((host, port), handler)
+    server.daemon_threads = True
+    return server
+
+
+def start_in_thread(app: App, host: str = "127.0.0.1", port: int = 0) -> ThreadingHTTPServer:
+    """Serve in a daemon thread (tests, ``umf generate --view``); ``shutdown()`` stops it."""
+    server = make_server(app, host, port)
+    threading.Thread(target=server.serve_forever, name="umf-serve", daemon=True).start()
+    return server
