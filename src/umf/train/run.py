@@ -74,7 +74,8 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
     """
     from umf.train.latents import LatentBankDataset, build_bank
 
-    frames = dict(min_frames=t.min_frames, max_frames=min(t.max_frames, cfg.vae.max_frames))
+    most = min(t.max_frames, cfg.vae.max_frames)
+    frames = dict(min_frames=min(t.min_frames, most), max_frames=most)
     latents: list = []
 
     def loader(kind: str, split: str):
