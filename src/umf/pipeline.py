@@ -30,6 +30,7 @@ from umf.representation import (
     assemble_features,
     canonical_transform,
     features_to_joints,
+    fuse_positions,
     joints_to_rot6d,
     transform_features,
 )
@@ -304,7 +305,8 @@ class UMFPipeline:
     def decode(self, z: torch.Tensor, num_frames: int) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262)."""
         mask = torch.ones(z.shape[0], num_frames, dtype=torch.bool, device=z.device)
-        return self.normalizer.denormalize(self.vae.decode(z, mask))
+        raw = self.normalizer.denormalize(self.vae.decode(z, mask))
+        return fuse_positions(raw, self.config.vae.position_fusion, self.config.vae.root_fusion)
 
     def _canonical_actor(self, actor: np.ndarray) -> tuple[torch.Tensor, RigidTransform]:
         """The actor (T, 22, 3) in its canonical frame, and the map into that frame."""

@@ -197,6 +197,53 @@ def features_to_joints_integrated(features: Tensor) -> Tensor:
     return torch.cat([pos, last], dim=-3)
 
 
+def _fuse(pos: Tensor, vel: Tensor, weight: float) -> Tensor:
+    """argmin_P weight * |P - pos|^2 + |diff(P) - vel[:-1]|^2 over time (axis -2), float64."""
+    t = pos.shape[-2]
+    diff = torch.zeros(t - 1, t, dtype=torch.float64, device=pos.device)
+    idx = torch.arange(t - 1, device=pos.device)
+    diff[idx, idx], diff[idx, idx + 1] = -1.0, 1.0
+    system = weight * torch.eye(t, dtype=torch.float64, device=pos.device) + diff.T @ diff
+    return torch.linalg.solve(system, weight * pos + diff.T @ vel[..., :-1, :])
+
+
+def fuse_positions(features: Tensor, position_weight: float, root_weight: float | None = None
+                   ) -> Tensor:  # fmt: skip
+    """Make positions and velocities of decoded features (..., T, 262) agree.
+
+    The feature is over-complete: positions and frame-to-frame velocities describe the
+    same motion twice. A decoder predicts each with its own small frame-to-frame noise,
+    and the noise in positions is what shows (a body that shakes by centimetres every
+    frame, a standing person whose pelvis wanders). The fused positions P minimise, per
+    coordinate,
+
+        weight * sum_t |P_t - P^_t|^2 + sum_t |P_{t+1} - P_t - V^_t|^2,
+
+    following the predicted velocities from frame to frame and the predicted positions
+    over longer spans (no drift). The pelvis path uses ``root_weight`` (default: the
+    same), the joints relative to the pelvis ``position_weight``: a smaller root weight
+    trusts the velocities longer, where the absolute path is noisiest. The velocity slots
+    become the fused differences. Tridiagonal systems of T unknowns, one solve each.
+    """
+    t = features.shape[-2]
+    if position_weight <= 0 or t < 2:
+        return features
+    root_weight = position_weight if root_weight is None else root_weight
+    lead = features.shape[:-1]
+    pos = features[..., POS].to(torch.float64).reshape(*lead, NUM_JOINTS, 3)
+    vel = features[..., VEL].to(torch.float64).reshape(*lead, NUM_JOINTS, 3)
+    root, root_vel = pos[..., :1, :], vel[..., :1, :]
+    flat = (*lead[:-1], t, -1)
+    rel = _fuse((pos - root).reshape(flat), (vel - root_vel).reshape(flat), position_weight)
+    path = _fuse(root.reshape(flat), root_vel.reshape(flat), root_weight)
+    fused = (rel.reshape(pos.shape) + path.reshape(root.shape)).reshape(*lead, 66)
+    vel = features[..., VEL].to(torch.float64)
+    new_vel = torch.cat([fused[..., 1:, :] - fused[..., :-1, :], vel[..., -1:, :]], dim=-2)
+    rest = features[..., VEL.stop :]
+    dtype = features.dtype
+    return torch.cat([fused.to(dtype), new_vel.to(dtype), rest], dim=-1)
+
+
 def features_to_local_rotations(features: Tensor) -> Tensor:
     """(..., T, 262) -> local rotation matrices (..., T, 21, 3, 3) of joints 1..21."""
     d6 = features[..., ROT].reshape(*features.shape[:-1], NUM_JOINTS - 1, 6)

@@ -25,7 +25,7 @@ from umf.body_frame import (
     ROOT,
     to_body_frame,
 )
-from umf.representation import POS, Normalizer
+from umf.representation import POS, Normalizer, fuse_positions
 
 Array = np.ndarray
 
@@ -52,8 +52,12 @@ def reconstruct(
         x = normalizer.normalize(x).masked_fill(~mask[..., None], 0.0).to(device)
         mask = mask.to(device)
         mu, _ = vae.encode(x, mask)
-        y = normalizer.denormalize(vae.decode(mu, mask)).cpu().numpy()
-        out.extend(y[j, : f.shape[0]] for j, f in enumerate(chunk))
+        y = normalizer.denormalize(vae.decode(mu, mask))
+        # as the pipeline decodes: positions made consistent with velocities, per clip
+        cfg = vae.cfg
+        y = [fuse_positions(y[j, : f.shape[0]], cfg.position_fusion, cfg.root_fusion)
+             for j, f in enumerate(chunk)]  # fmt: skip
+        out.extend(r.cpu().numpy() for r in y)
     return out
 
 
