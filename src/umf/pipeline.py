@@ -110,8 +110,9 @@ class Scene:
         for i, person in enumerate(torch.from_numpy(self.joints).double(), start=1):
             offsets = fit_offsets(person)
             local = inverse_kinematics(person, offsets)
-            # not str.format: a directory name may hold braces ("runs/take{x}")
-            path = Path(str(path_pattern).replace("{i}", str(i)))
+            # only the file name, and not str.format: directories may hold braces
+            pattern = Path(path_pattern)
+            path = pattern.parent / pattern.name.replace("{i}", str(i))
             write_smpl22_bvh(path, local.numpy(), person[:, 0].numpy(), offsets.numpy(),
                              self.fps)  # fmt: skip
             out.append(path)

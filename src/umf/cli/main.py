@@ -62,7 +62,7 @@ def run(argv: list[str] | None = None) -> None:
     except click_errors.UsageError as exc:
         print(f"umf: error: {_one_line(exc.format_message())}", file=sys.stderr)
         sys.exit(exc.exit_code)
-    except click_errors.Abort:
+    except typer.Abort:
         print("umf: interrupted", file=sys.stderr)
         sys.exit(130)
     except UMFError as exc:
@@ -71,6 +71,8 @@ def run(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         print("umf: interrupted", file=sys.stderr)
         sys.exit(130)
+    if code == 130:  # typer turns Ctrl-C into exit code 130
+        print("umf: interrupted", file=sys.stderr)
     sys.exit(code if isinstance(code, int) else 0)
 
 
