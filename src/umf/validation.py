@@ -237,6 +237,27 @@ def check_finite(x: Any, what: str) -> None:
         raise UMFError(f"non-finite values (NaN or inf) in {what}")
 
 
+def check_device(device: str) -> str:
+    """``cpu``, ``cuda`` or ``cuda:N`` that this machine has (``auto``: cuda when present)."""
+    import torch
+
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise UMFError(f"--device must be auto, cpu or cuda[:i], got {device!r}") from exc
+    if dev.type not in ("cpu", "cuda"):
+        raise UMFError(f"--device must be auto, cpu or cuda[:i], got {device!r}")
+    if dev.type == "cuda":
+        count = torch.cuda.device_count()
+        if count == 0:
+            raise UMFError(f"--device {device}: no CUDA device on this machine")
+        if dev.index is not None and dev.index >= count:
+            raise UMFError(f"--device {device}: this machine has {count} CUDA device(s)")
+    return device
+
+
 def chunk_size(num_people: int, frames: int, budget: int = CHUNK_PERSON_FRAMES) -> int:
     """Scenes sampled together so that one chunk holds at most ``budget`` person-frames."""
     return max(1, budget // max(1, num_people * frames))
@@ -279,6 +300,8 @@ def _check_value(where: str, kind: str, value: Any) -> None:
     if kind.startswith("bool"):
         if not isinstance(value, bool):
             raise UMFError(f"{where} must be true or false, got {value!r}")
+    elif kind.startswith("int") and name == "steps":
+        check_int(where, value, 1, MAX_FLOW_STEPS)
     elif kind.startswith("int"):
         hi = 2**63 - 1 if name in _UNBOUNDED else MAX_LAYERS if "layers" in name else MAX_CONFIG_INT
         check_int(where, value, 0, hi)
