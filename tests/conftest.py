@@ -74,6 +74,8 @@ class FakeText:
     """A fast stand-in for MiniLM (same width): fixed random token states per prompt."""
 
     dim = 384
+    device = torch.device("cpu")
+    identity = "fake-text"
 
     def encode(self, texts: list[str]):
         import zlib
