@@ -49,3 +49,10 @@ def test_a_crowd_always_ends_apart():
         gaps = [np.linalg.norm(placed[i] - placed[j], axis=-1).min()
                 for i in range(10) for j in range(i)]  # fmt: skip
         assert min(gaps) >= 0.5 - 1e-6, seed
+
+
+def test_non_finite_paths_do_not_hang():
+    """NaN never 'clears' anybody: separation must still return (the caller reports it)."""
+    from umf.separation import separation_shifts
+
+    assert np.isfinite(separation_shifts(np.full((3, 5, 2), np.nan))).all()

@@ -339,6 +339,7 @@ class UMFPipeline:
         if frame is not None:  # back into the user's frame; person 1 is their motion exactly
             feats = transform_features(feats.cpu(), frame, inverse=True)
             feats[:, 0] = assemble_features(torch.from_numpy(actor).float(), rot6d)
+        check_finite(feats, "the decoded motion (VAE and normaliser)")
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
         if separate and num_people > 1:
             feats = feats.cpu()
@@ -347,7 +348,6 @@ class UMFPipeline:
                 shifts[i] = shift
             offset = torch.from_numpy(shifts).to(feats).repeat(1, 1, 22)  # (B, N, 66)
             feats[..., :66] = feats[..., :66] + offset[:, :, None, :]
-        check_finite(feats, "the decoded motion (VAE and normaliser)")
         joints = features_to_joints(feats)
         check_finite(joints, "the generated joints")
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people}

@@ -65,7 +65,7 @@ def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: floa
             closest_approach(path, pelvis[j] + shifts[j])[0] >= min_distance for j in range(k)
         )
 
-    if clear():
+    if clear() or not np.isfinite(pelvis[: k + 1]).all():  # NaN never clears: leave it
         return
     centre = np.mean([(pelvis[j] + shifts[j]).mean(0) for j in range(k)], axis=0)
     away = (pelvis[k] + shifts[k]).mean(0) - centre
