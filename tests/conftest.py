@@ -68,3 +68,57 @@ TINY_MODEL = [
     "sflow.denoiser.text_width=32", "sflow.denoiser.text_heads=2", "sflow.denoiser.text_ff_dim=64",
     "sflow.context_ff_dim=32", "sflow.steps=3",
 ]  # fmt: skip
+
+
+class FakeText:
+    """A fast stand-in for MiniLM (same width): fixed random token states per prompt."""
+
+    dim = 384
+    device = torch.device("cpu")
+    identity = "fake-text"
+
+    def encode(self, texts: list[str]):
+        import zlib
+
+        from umf.text import TextFeatures
+
+        gens = [torch.Generator().manual_seed(zlib.crc32(t.encode())) for t in texts]
+        lengths = [1 + len(t.split()) for t in texts]
+        width = max(lengths)
+        tokens = torch.zeros(len(texts), width, self.dim)
+        mask = torch.zeros(len(texts), width, dtype=torch.bool)
+        for i, (g, n) in enumerate(zip(gens, lengths, strict=True)):
+            tokens[i, :n] = torch.randn(n, self.dim, generator=g)
+            mask[i, :n] = True
+        return TextFeatures(tokens, mask, tokens.sum(1) / mask.sum(1, keepdim=True))
+
+
+def tiny_config():
+    from umf.config import set_option, small_config
+
+    cfg = small_config()
+    for o in TINY_MODEL:
+        cfg = set_option(cfg, o)
+    return cfg
+
+
+def save_tiny_model(out: Path, seed: int = 0) -> Path:
+    """An untrained tiny UMF model directory (what `umf train export` writes), in a second."""
+    from umf.pipeline import UMFPipeline
+    from umf.representation import Normalizer
+    from umf.train.checkpoint import save_checkpoint
+
+    torch.manual_seed(seed)
+    cfg = tiny_config()
+    pipe = UMFPipeline.build(cfg, text_encoder=FakeText())
+    norm = Normalizer(torch.zeros(262), torch.full((262,), 0.1))
+    modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
+    return save_checkpoint(out, modules, config=cfg.to_dict(), normalizer=norm)
+
+
+@pytest.fixture
+def fake_text(monkeypatch):
+    """Model loading builds FakeText instead of MiniLM (seconds per load saved)."""
+    import umf.text
+
+    monkeypatch.setattr(umf.text, "build_text_encoder", lambda *a, **k: FakeText())

@@ -35,8 +35,23 @@ from umf.representation import (
     transform_features,
 )
 from umf.separation import separate_people
+from umf.streams import fresh_seed, scene_generators
+from umf.validation import (
+    MAX_PEOPLE,
+    Request,
+    check_actor,
+    check_config_values,
+    check_finite,
+    check_for_model,
+    check_model_weights,
+    check_request,
+    check_weight_shapes,
+    chunk_size,
+    chunks,
+    dry_run_build,
+)
 
-MAX_PEOPLE = 16
+__all__ = ["MAX_PEOPLE", "Scene", "UMFPipeline", "default_model_dir"]
 
 
 @dataclass
@@ -96,7 +111,9 @@ class Scene:
         for i, person in enumerate(torch.from_numpy(self.joints).double(), start=1):
             offsets = fit_offsets(person)
             local = inverse_kinematics(person, offsets)
-            path = Path(str(path_pattern).format(i=i))
+            # only the file name, and not str.format: directories may hold braces
+            pattern = Path(path_pattern)
+            path = pattern.parent / pattern.name.replace("{i}", str(i))
             write_smpl22_bvh(path, local.numpy(), person[:, 0].numpy(), offsets.numpy(),
                              self.fps)  # fmt: skip
             out.append(path)
@@ -165,7 +182,11 @@ class UMFPipeline:
 
         A model directory is a umf checkpoint with the modules ``vae``, ``pflow`` and
         ``sflow`` (``umf train export`` writes one); every problem is a one-line UMFError.
+        ``config.json`` is checked (types, ranges, a dry-run build on the meta device, shapes
+        against the weight files' headers) before anything is allocated, and the loaded
+        weights and normaliser must be finite.
         """
+        from umf.text import build_text_encoder
         from umf.train.checkpoint import load_checkpoint, read_info
 
         path = Path(path) if path is not None else default_model_dir()
@@ -177,12 +198,24 @@ class UMFPipeline:
             raise UMFError(f"{path}: not a complete umf model (no {', '.join(sorted(missing))})")
         try:
             config = UMFConfig.from_dict(json.loads((path / "config.json").read_text()))
-        except (OSError, json.JSONDecodeError) as exc:
+        except (OSError, json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise UMFError(f"{path}/config.json: unreadable ({exc})") from exc
-        pipe = cls.build(config, None, text_encoder)
-        ck = load_checkpoint(path, {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow})
+        except UMFError as exc:
+            raise UMFError(f"{path}/config.json: {exc}") from exc
+        try:
+            check_config_values(config)
+        except UMFError as exc:
+            raise UMFError(f"{path}/config.json: {exc}") from exc
+        enc = text_encoder or build_text_encoder(
+            config.text.encoder, config.text.path, max_length=config.text.max_length
+        )
+        check_weight_shapes(path, dry_run_build(config, enc.dim))
+        pipe = cls.build(config, None, enc)
+        modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
+        ck = load_checkpoint(path, modules)
         if ck.normalizer is None:
             raise UMFError(f"{path}: missing normalizer.safetensors")
+        check_model_weights(modules, ck.normalizer, path)
         pipe.normalizer = ck.normalizer
         pipe.name = str(info.get("name") or path.name)
         for m in (pipe.vae, pipe.pflow, pipe.sflow):
@@ -217,8 +250,16 @@ class UMFPipeline:
         sflow_steps: int | None = None,
         actor: np.ndarray | None = None,
         separate: bool = True,
+        sample_indices: Sequence[int] | None = None,
     ) -> list[Scene]:
         """Generate one scene per prompt (batched).
+
+        Scene ``i`` is a function of (model, prompt, people, seconds, seed, sample index)
+        alone: its noise comes from its own generator (:mod:`umf.streams`), whatever else
+        is in the call. ``sample_indices`` numbers the samples (default: 0 for the first
+        copy of a prompt in ``prompts``, 1 for the second ...); ``seed`` None draws one,
+        recorded in ``scene.seed``. Every argument is checked first (:mod:`umf.validation`)
+        and scenes are sampled in chunks of bounded memory; non-finite output is an error.
 
         ``actor`` (T, 22, 3) joints in metres at the model's fps, in any frame, fixes
         person 1 (the paper's action-reaction task): it is moved into the canonical frame
@@ -231,13 +272,32 @@ class UMFPipeline:
         (:mod:`umf.separation`); the motions themselves are untouched and the shifts are
         in ``scene.meta["shifts"]``. Evaluation turns it off to score the raw model.
         """
-        prompts = [prompts] if isinstance(prompts, str) else list(prompts)
-        if not prompts or any(not p.strip() for p in prompts):
-            raise UMFError("the prompt is empty")
-        if not 1 <= num_people <= MAX_PEOPLE:
-            raise UMFError(f"--people must be between 1 and {MAX_PEOPLE}, got {num_people}")
-        gen = torch.Generator(device="cpu")
-        gen.manual_seed(int(seed) if seed is not None else torch.seed())
+        req = check_request(prompts, num_people, seconds, seed, guidance, pflow_steps,
+                            sflow_steps, sample_indices)  # fmt: skip
+        frames = check_for_model(req, self.config, acting=actor is not None)
+        if actor is not None:
+            actor = check_actor(actor, self.config.fps, self.config.vae.max_frames)
+            frames = actor.shape[0] - 1
+        seed = fresh_seed() if req.seed is None else req.seed
+        scenes: list[Scene] = []
+        for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
+            texts = [req.prompts[i] for i in part]
+            indices = [req.sample_indices[i] for i in part]
+            scenes += self._sample(texts, indices, req, seed, actor, separate)
+        return scenes
+
+    def _sample(
+        self,
+        prompts: list[str],
+        indices: list[int],
+        req: Request,
+        seed: int,
+        actor: np.ndarray | None,
+        separate: bool,
+    ) -> list[Scene]:
+        """One chunk of scenes, each drawing its noise from its own stream."""
+        num_people, guidance = req.num_people, req.guidance
+        gen = scene_generators(seed, indices, self.device)
         b = len(prompts)
         text = self.text_encoder.encode(prompts).to(self.device)
         uncond = self.text_encoder.encode([""] * b).to(self.device)
@@ -249,13 +309,13 @@ class UMFPipeline:
             rot6d = joints_to_rot6d(actor_t)  # local rotations: the same in the user's frame
             latents = [self._encode_actor(assemble_features(actor_t, rot6d), b)]
         else:
-            t = self._frames(seconds)
+            t = self._frames(req.seconds)
             dataset = torch.full((b,), 1 if num_people > 1 else 0, dtype=torch.long)
             z1, n = self.pflow.sample(
                 text,
                 uncond,
                 dataset=dataset.to(self.device),
-                steps=tuple(pflow_steps) if pflow_steps else self.config.pflow.steps,
+                steps=req.pflow_steps or self.config.pflow.steps,
                 guidance=self.config.pflow.guidance if guidance is None else guidance,
                 generator=gen,
             )
@@ -268,17 +328,19 @@ class UMFPipeline:
                 mask,
                 text,
                 uncond,
-                steps=sflow_steps or self.config.sflow.steps,
+                steps=self.config.sflow.steps if req.sflow_steps is None else req.sflow_steps,
                 guidance=self.config.sflow.guidance if guidance is None else guidance,
                 generator=gen,
             )
             latents.append(w)
             nfe += n
         z = torch.stack(latents, dim=1)  # (B, N, p, r)
+        check_finite(z, "the sampled latents (P-Flow / S-Flow output)")
         feats = self.decode(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
         if frame is not None:  # back into the user's frame; person 1 is their motion exactly
             feats = transform_features(feats.cpu(), frame, inverse=True)
             feats[:, 0] = assemble_features(torch.from_numpy(actor).float(), rot6d)
+        check_finite(feats, "the decoded motion (VAE and normaliser)")
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
         if separate and num_people > 1:
             feats = feats.cpu()
@@ -288,6 +350,7 @@ class UMFPipeline:
             offset = torch.from_numpy(shifts).to(feats).repeat(1, 1, 22)  # (B, N, 66)
             feats[..., :66] = feats[..., :66] + offset[:, :, None, :]
         joints = features_to_joints(feats)
+        check_finite(joints, "the generated joints")
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people}
         return [
             Scene(
@@ -297,7 +360,7 @@ class UMFPipeline:
                 self.config.fps,
                 seed,
                 self.name,
-                {**meta, "shifts": shifts[i].tolist()},
+                {**meta, "shifts": shifts[i].tolist(), "sample_index": indices[i]},
             )
             for i in range(b)
         ]

@@ -51,7 +51,30 @@ def separation_shifts(
                 angle = 2.0 * np.pi * k / (n + 1)
                 away = np.array([np.cos(angle), np.sin(angle)])
             shifts[k] += away / max(np.linalg.norm(away), 1e-9) * (min_distance - d + 1e-3)
+        _walk_out(pelvis, shifts, k, min_distance)
     return shifts
+
+
+def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: float) -> None:
+    """Pushes between two neighbours can cycle in a crowd: then move person k straight away
+    from the others' centre until it clears all of them (always ends: they are finite)."""
+
+    def clear() -> bool:
+        path = pelvis[k] + shifts[k]
+        return all(
+            closest_approach(path, pelvis[j] + shifts[j])[0] >= min_distance for j in range(k)
+        )
+
+    if clear() or not np.isfinite(pelvis[: k + 1]).all():  # NaN never clears: leave it
+        return
+    centre = np.mean([(pelvis[j] + shifts[j]).mean(0) for j in range(k)], axis=0)
+    away = (pelvis[k] + shifts[k]).mean(0) - centre
+    if np.linalg.norm(away) < 1e-6:
+        angle = 2.0 * np.pi * k / (k + 2)
+        away = np.array([np.cos(angle), np.sin(angle)])
+    away = away / np.linalg.norm(away)
+    while not clear():
+        shifts[k] += away * (min_distance / 4)
 
 
 def separate_people(

@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 
 from umf.errors import UMFError
+from umf.validation import check_device
 
 DEFAULT_CORPUS = Path("out/corpus")
 
@@ -81,8 +82,6 @@ def evaluate(
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:  # fmt: skip
     """Score a model (and variants) on the test split; write report.md, metrics.json, PNGs."""
-    import torch
-
     from umf.eval.report import EvalRequest, make_plan, model_label, parse_variant, run_eval
 
     plan = make_plan(quick, replications, mm_prompts, mm_samples, seed, batch, length_step)
@@ -95,8 +94,7 @@ def evaluate(
         ("--length-step", length_step),
         ("--device", device if device != "auto" else None),
     ])  # fmt: skip
-    if device == "auto":
-        device = "cuda" if torch.cuda.is_available() else "cpu"
+    device = check_device(device)
     req = EvalRequest(
         checkpoint=checkpoint,
         corpus=resolve_corpus(corpus),

@@ -8,8 +8,23 @@ from pathlib import Path
 import typer
 
 from umf.errors import UMFError
-
-FORMATS = ("npz", "gif", "mp4", "bvh", "glb")
+from umf.validation import (
+    FORMATS,
+    MAX_SECONDS,
+    MIN_SECONDS,
+    check_actor,
+    check_batch,
+    check_float,
+    check_for_model,
+    check_formats,
+    check_int,
+    check_out_dir,
+    check_request,
+    check_targets,
+    chunk_size,
+    chunks,
+)
+from umf.writer import clean_stale, scene_targets, write_scene_files
 
 
 def _slug(text: str, limit: int = 40) -> str:
@@ -17,23 +32,17 @@ def _slug(text: str, limit: int = 40) -> str:
 
 
 def parse_formats(formats: str) -> list[str]:
-    wanted = [f.strip().lower() for f in formats.split(",") if f.strip()]
-    bad = [f for f in wanted if f not in FORMATS]
-    if bad or not wanted:
-        raise UMFError(f"unknown format {','.join(bad) or formats!r}; choose from {FORMATS}")
-    return wanted
+    return check_formats(formats)
 
 
 def parse_steps(steps: str | None) -> list[int] | None:
+    """``--steps 45,5`` as integers; their bounds are checked by :func:`check_request`."""
     if not steps:
         return None
     try:
-        values = [int(s) for s in steps.split(",")]
+        return [int(s) for s in steps.split(",")]
     except ValueError as exc:
         raise UMFError(f"--steps takes integers like 45,5, got {steps!r}") from exc
-    if any(v < 1 for v in values):
-        raise UMFError(f"--steps must be positive, got {steps!r}")
-    return values
 
 
 def load_pipeline(model: Path | None):
@@ -45,19 +54,32 @@ def load_pipeline(model: Path | None):
     return UMFPipeline.from_pretrained(model)
 
 
+def peek_config(model: Path | None):
+    """The model's config.json for model-specific checks before loading, or None when it
+    cannot be read (loading then reports why)."""
+    import json
+
+    from umf.config import UMFConfig
+    from umf.pipeline import default_model_dir
+    from umf.validation import check_config_values
+
+    path = (model if model is not None else default_model_dir()) / "config.json"
+    try:
+        config = UMFConfig.from_dict(json.loads(path.read_text()))
+        check_config_values(config)
+    except (OSError, ValueError, UMFError):
+        return None
+    return config
+
+
 def write_scene(scene, stem: Path, wanted: list[str]) -> list[Path]:
-    """Every requested file of one scene, named ``stem.*`` (BVH: one per person)."""
-    written: list[Path] = []
-    if "npz" in wanted:
-        written.append(scene.save_npz(stem.with_suffix(".npz")))
-    if "bvh" in wanted:
-        written += scene.save_bvh(f"{stem}-p{{i}}.bvh")
-    if "glb" in wanted:
-        written.append(scene.save_glb(stem.with_suffix(".glb")))
-    for ext in ("gif", "mp4"):
-        if ext in wanted:
-            written.append(scene.render(stem.with_suffix(f".{ext}"), progress=False))
-    return written
+    """Every requested file of one scene, named ``stem.*`` (BVH: one per person), all
+    written together (:mod:`umf.writer`)."""
+    return write_scene_files(scene, stem, wanted)
+
+
+def _stem(out: Path, k: int, text: str, j: int, batch: int) -> Path:
+    return out / (f"{k:02d}-{_slug(text)}" + (f"-{j}" if batch > 1 else ""))
 
 
 def _read_prompts(prompt: str | None, prompts: Path | None) -> list[str]:
@@ -75,20 +97,15 @@ def _read_prompts(prompt: str | None, prompts: Path | None) -> list[str]:
     return texts
 
 
-def _check_batch(batch: int) -> None:
-    if not 1 <= batch <= 256:
-        raise UMFError(f"--batch must be between 1 and 256, got {batch}")
-
-
 def generate(
     prompt: str | None = typer.Argument(None, help="What the people do."),
     people: int = typer.Option(2, "--people", "-n", help="Number of people (1-16)."),
     seconds: float = typer.Option(4.0, help="Duration (0.5-10 s)."),
-    seed: int = typer.Option(0, help="Random seed."),
-    guidance: float | None = typer.Option(None, help="Classifier-free guidance (model default)."),
-    steps: str | None = typer.Option(None, help="P-Flow steps per stage, coarse to fine: 45,5."),
-    sflow_steps: int | None = typer.Option(None, help="S-Flow steps per person."),
-    batch: int = typer.Option(1, "--batch", "-b", help="Scenes per prompt, sampled together."),
+    seed: int = typer.Option(0, help="Random seed (0 to 2^64-1)."),
+    guidance: float | None = typer.Option(None, help="CFG scale, 0-20 (model default)."),
+    steps: str | None = typer.Option(None, help="P-Flow steps per stage: 45,5 (200 in all)."),
+    sflow_steps: int | None = typer.Option(None, help="S-Flow steps per person (1-200)."),
+    batch: int = typer.Option(1, "--batch", "-b", help="Samples per prompt (1-256)."),
     prompts: Path | None = typer.Option(None, help="Text file: one prompt per line."),
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
     out: Path = typer.Option(Path("out/generate"), help="Output directory."),
@@ -99,26 +116,39 @@ def generate(
     """Generate synchronized motion for N people from text."""
     wanted = parse_formats(formats)
     texts = _read_prompts(prompt, prompts)
-    step_list = parse_steps(steps)
-    _check_batch(batch)
+    req = check_request(texts, people, seconds, seed, guidance, parse_steps(steps), sflow_steps)
+    batch = check_batch(batch, len(texts))
+    check_out_dir(out)
     if view:  # before the work: say at once when the page cannot be shown
         from umf.serve.server import find_three, three_missing_message
 
         if find_three() is None:
             raise UMFError(three_missing_message())
-    pipe = load_pipeline(model)
     jobs = [(k, text, j) for k, text in enumerate(texts) for j in range(batch)]
-    scenes = pipe([text for _, text, _ in jobs], num_people=people, seconds=seconds, seed=seed,
-                  guidance=guidance, pflow_steps=step_list, sflow_steps=sflow_steps)  # fmt: skip
-    for (k, text, j), scene in zip(jobs, scenes, strict=True):
-        stem = out / f"{k:02d}-{_slug(text)}" if batch == 1 else out / f"{k:02d}-{_slug(text)}-{j}"
-        for path in write_scene(scene, stem, wanted):
-            typer.echo(f"wrote {path}")
+    stems = [_stem(out, k, text, j, batch) for k, text, j in jobs]
+    check_targets([p for stem in stems for p in scene_targets(stem, wanted, req.num_people)])
+    config = peek_config(model)
+    if config is not None:
+        check_for_model(req, config)
+    pipe = load_pipeline(model)
+    frames = check_for_model(req, pipe.config)
+    clean_stale(out)
+    shown = []
+    for part in chunks(len(jobs), chunk_size(req.num_people, frames)):
+        scenes = pipe([jobs[i][1] for i in part], num_people=req.num_people, seconds=req.seconds,
+                      seed=req.seed, guidance=req.guidance, pflow_steps=req.pflow_steps,
+                      sflow_steps=req.sflow_steps,
+                      sample_indices=[jobs[i][2] for i in part])  # fmt: skip
+        for i, scene in zip(part, scenes, strict=True):
+            for path in write_scene(scene, stems[i], wanted):
+                typer.echo(f"wrote {path}")
+        if view:
+            shown.extend(scenes)
     if view:
         from umf.cli.serve import view_scenes
 
-        params = {"seed": seed, "guidance": guidance, "steps": step_list}
-        view_scenes(scenes, pipe, params | {"sflow_steps": sflow_steps}, port)
+        params = {"seed": req.seed, "guidance": req.guidance, "steps": req.pflow_steps}
+        view_scenes(shown, pipe, params | {"sflow_steps": req.sflow_steps}, port)
 
 
 def react(
@@ -128,9 +158,9 @@ def react(
     actor_person: int = typer.Option(1, help="Which person of a multi-person .npz to use."),
     start: float = typer.Option(0.0, help="Where in the actor file to start (s)."),
     seconds: float | None = typer.Option(None, help="How much of it to use (default: all)."),
-    seed: int = typer.Option(0, help="Random seed."),
-    guidance: float | None = typer.Option(None, help="Classifier-free guidance (model default)."),
-    sflow_steps: int | None = typer.Option(None, help="S-Flow steps per person."),
+    seed: int = typer.Option(0, help="Random seed (0 to 2^64-1)."),
+    guidance: float | None = typer.Option(None, help="CFG scale, 0-20 (model default)."),
+    sflow_steps: int | None = typer.Option(None, help="S-Flow steps per person (1-200)."),
     batch: int = typer.Option(1, "--batch", "-b", help="Scenes to sample around the actor."),
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
     out: Path = typer.Option(Path("out/react"), help="Output directory."),
@@ -140,11 +170,19 @@ def react(
     from umf.data.motion_file import FPS, load_motion
 
     wanted = parse_formats(formats)
-    if not prompt.strip():
-        raise UMFError("the prompt is empty")
-    _check_batch(batch)
-    if people < 2:
+    req = check_request(prompt, people, seed=seed, guidance=guidance, sflow_steps=sflow_steps)
+    if req.num_people < 2:
         raise UMFError(f"--people counts the actor, so it must be at least 2, got {people}")
+    batch = check_batch(batch, 1)
+    start = check_float("--start", start, 0.0, 1e6)
+    if seconds is not None:
+        seconds = check_float("--seconds", seconds, MIN_SECONDS, MAX_SECONDS)
+    check_int("--actor-person", actor_person, 1, 1 << 20)
+    check_out_dir(out)
+    stems = [
+        out / (f"react-{_slug(prompt)}" + (f"-{j}" if batch > 1 else "")) for j in range(batch)
+    ]
+    check_targets([p for stem in stems for p in scene_targets(stem, wanted, req.num_people)])
     motion = load_motion(actor)
     if not 1 <= actor_person <= motion.num_people:
         raise UMFError(f"{actor}: has {motion.num_people} people, no person {actor_person}")
@@ -154,17 +192,25 @@ def react(
         raise UMFError(
             f"--start {start} s is outside the actor motion ({joints.shape[0] / FPS:.1f} s)"
         )
-    pipe = load_pipeline(model)
-    most = pipe.config.vae.max_frames + 1
+    if seconds is not None and first + round(seconds * FPS) + 1 > joints.shape[0]:
+        left = (joints.shape[0] - 1 - first) / FPS
+        raise UMFError(f"--seconds {seconds}: the actor motion has only {left:.1f} s after --start")
+    config = peek_config(model)
+    most = (config.vae.max_frames if config is not None else 300) + 1
     count = most if seconds is None else round(seconds * FPS) + 1
     joints = joints[first : first + count]
+    if config is not None:
+        check_actor(joints, FPS, config.vae.max_frames)
+    pipe = load_pipeline(model)
     if seconds is None and motion.num_frames - first > most:
         end = start + most / FPS
         typer.echo(f"note: the actor motion is longer than {most / FPS:.1f} s; using "
                    f"{start:.1f}-{end:.1f} s (--start/--seconds choose)")  # fmt: skip
-    scenes = pipe([prompt] * batch, num_people=people, seed=seed, guidance=guidance,
-                  sflow_steps=sflow_steps, actor=joints)  # fmt: skip
-    for j, scene in enumerate(scenes):
-        stem = out / (f"react-{_slug(prompt)}" + (f"-{j}" if batch > 1 else ""))
-        for path in write_scene(scene, stem, wanted):
-            typer.echo(f"wrote {path}")
+    clean_stale(out)
+    for part in chunks(batch, chunk_size(req.num_people, joints.shape[0])):
+        scenes = pipe([prompt] * len(part), num_people=req.num_people, seed=req.seed,
+                      guidance=req.guidance, sflow_steps=req.sflow_steps, actor=joints,
+                      sample_indices=list(part))  # fmt: skip
+        for j, scene in zip(part, scenes, strict=True):
+            for path in write_scene(scene, stems[j], wanted):
+                typer.echo(f"wrote {path}")

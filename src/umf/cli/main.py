@@ -14,6 +14,11 @@ from umf.cli.serve import serve, view
 from umf.cli.train import app as train_app
 from umf.errors import UMFError
 
+try:  # typer >= 0.20 parses with its own copy of click
+    from typer._click import exceptions as click_errors
+except ImportError:  # pragma: no cover - older typer uses click itself
+    from click import exceptions as click_errors
+
 app = typer.Typer(
     name="umf",
     help="Unified Motion Flow: text + number of people -> synchronized 3-D motion.",
@@ -45,16 +50,33 @@ def _root(
     """Unified Motion Flow: text + number of people -> synchronized 3-D motion."""
 
 
-def run() -> None:
-    """Console-script entry: user errors become one line on stderr and exit code 1."""
+def _one_line(text: str) -> str:
+    return " ".join(str(text).split())
+
+
+def run(argv: list[str] | None = None) -> None:
+    """Console-script entry: user errors become one line on stderr and a non-zero exit
+    (1 for bad values and files, 2 for malformed command lines, as click uses)."""
     try:
-        app()
+        code = app(args=argv, standalone_mode=False)
+    except click_errors.NoArgsIsHelpError as exc:
+        exc.show()  # `umf` or `umf train` alone: the help, as before
+        sys.exit(exc.exit_code)
+    except click_errors.UsageError as exc:
+        print(f"umf: error: {_one_line(exc.format_message())}", file=sys.stderr)
+        sys.exit(exc.exit_code)
+    except typer.Abort:
+        print("umf: interrupted", file=sys.stderr)
+        sys.exit(130)
     except UMFError as exc:
-        print(f"umf: error: {exc}", file=sys.stderr)
+        print(f"umf: error: {_one_line(str(exc))}", file=sys.stderr)
         sys.exit(1)
     except KeyboardInterrupt:
         print("umf: interrupted", file=sys.stderr)
         sys.exit(130)
+    if code == 130:  # typer turns Ctrl-C into exit code 130
+        print("umf: interrupted", file=sys.stderr)
+    sys.exit(code if isinstance(code, int) else 0)
 
 
 if __name__ == "__main__":

@@ -111,7 +111,9 @@ def _fingerprint(path: Path) -> str:
     return h.hexdigest()[:16]
 
 
-def _save_clips(path: Path, clips: list[MotionClip]) -> None:
+def _save_clips(
+    path: Path, clips: list[MotionClip], skipped: list[tuple[str, str]] | None = None
+) -> None:
     index = [
         {
             "id": c.id, "source": c.source, "split": c.split, "captions": c.captions,
@@ -121,6 +123,8 @@ def _save_clips(path: Path, clips: list[MotionClip]) -> None:
     ]  # fmt: skip
     joints = _concat([c.joints.reshape(-1, 22, 3) for c in clips], (22, 3))
     arrays = {"joints": joints, "index": np.array(json.dumps(index))}
+    if skipped is not None:  # the cache remembers the inputs it could not read
+        arrays["skipped"] = np.array(json.dumps([list(p) for p in skipped]))
     if clips and all(c.rot6d is not None for c in clips):
         arrays["rot6d"] = _concat([c.rot6d.reshape(-1, 21, 6) for c in clips], (21, 6))
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
@@ -167,7 +171,9 @@ def load_source(
     cache = cache_dir / f"{name}-{_fingerprint(path)}.npz"
     if cache.exists():
         try:
-            return _load_clips(cache), True
+            clips = _load_clips(cache)
+            problems.extend(_load_skipped(cache))
+            return clips, True
         except (OSError, ValueError, KeyError, json.JSONDecodeError):
             cache.unlink(missing_ok=True)  # a broken cache is rebuilt, never trusted
     clips: list[MotionClip] = []
@@ -183,8 +189,16 @@ def load_source(
     problems.extend((str(origin), str(reason)) for origin, reason in found)
     for stale in cache_dir.glob(f"{name}-*.npz"):  # older inputs or conversion versions
         stale.unlink(missing_ok=True)
-    _save_clips(cache, clips)
+    _save_clips(cache, clips, [(str(o), str(r)) for o, r in found])
     return clips, False
+
+
+def _load_skipped(path: Path) -> list[tuple[str, str]]:
+    """The inputs a cached conversion skipped (a cache without the record is rebuilt)."""
+    with np.load(path) as z:
+        if "skipped" not in z:
+            raise KeyError("skipped")
+        return [(str(o), str(r)) for o, r in json.loads(str(z["skipped"]))]
 
 
 def clip_rot6d(clip: MotionClip) -> np.ndarray:
@@ -351,6 +365,23 @@ def fit_normalizer(
     return Normalizer.fit(torch.cat(feats))
 
 
+def check_prepare_config(config: PrepareConfig) -> None:
+    """Counts, fractions and sizes of ``data prepare`` (one-line errors, nothing written)."""
+    from umf.validation import check_float, check_int
+
+    check_int("--seed", config.seed, 0, 2**32 - 1)
+    check_int("--train-scenes", config.train_scenes, 1, 1_000_000)
+    for name in ("val_scenes", "test_scenes", "test_groups"):
+        check_int(f"--{name.replace('_', '-')}", getattr(config, name), 0, 1_000_000)
+    val = check_float("val_fraction", config.val_fraction, 0.0, 0.5)
+    test = check_float("test_fraction", config.test_fraction, 0.0, 0.5)
+    if val + test >= 1.0:
+        raise UMFError("val_fraction + test_fraction must be below 1")
+    if not config.group_sizes or any(not 3 <= g <= 16 for g in config.group_sizes):
+        raise UMFError(f"group_sizes must lie in 3..16, got {config.group_sizes}")
+    check_int("normalizer_max_frames", config.normalizer_max_frames, 1, 10**9)
+
+
 def prepare_corpus(
     out: str | Path,
     sources: dict[str, str | Path],
@@ -368,8 +399,12 @@ def prepare_corpus(
             raise UMFError(f"unknown source {name!r}")
         if not Path(path).exists():
             raise UMFError(f"{name} data not found: {path}")
+    check_prepare_config(config)
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
+    # the manifest marks a complete corpus: remove it first, write it last, so a run that
+    # dies in between leaves no corpus that loads with files of two different runs
+    (out / "manifest.json").unlink(missing_ok=True)
     cache_dir = out / "cache"
     problems: list[tuple[str, str]] = []
     clips: list[MotionClip] = []

@@ -74,6 +74,8 @@ def _load_bvh(path: Path) -> tuple[np.ndarray, float]:
     from umf.skeleton import JOINT_NAMES
 
     bvh = read_bvh(path)
+    if not bvh.frame_time > 0:
+        raise UMFError(f"{path}: 'Frame Time: {bvh.frame_time:g}' (must be positive seconds)")
     pos, _ = forward_kinematics(bvh)
     pos = np.asarray(pos, dtype=np.float64)
     index = {n: i for i, n in enumerate(bvh.names)}

@@ -42,6 +42,7 @@ from typing import Any, Literal
 
 import torch
 
+from umf.flows.noise import Generators, randn
 from umf.flows.paths import TimeDistribution, interpolate, sample_time
 from umf.flows.solvers import Method, ODESolution, Velocity, integrate
 
@@ -194,12 +195,12 @@ def block_noise(
     layout: Layout,
     g: float,
     *,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
     device: torch.device | str | None = None,
     dtype: torch.dtype = torch.float32,
 ) -> Tensor:
     """n' ~ N(0, Sigma') at the fine resolution ``shape`` = (..., n, r)."""
-    z = torch.randn(tuple(shape), generator=generator, device=device, dtype=dtype)
+    z = randn(shape, generator, device=device, dtype=dtype)
     return block_noise_from_white(z, layout, g)
 
 
@@ -211,7 +212,7 @@ def jump(
     alpha: float,
     layout: Layout,
     g: float,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
 ) -> Tensor:
     """Renoising jump (Eq. 11): z_s = (s/e) Up(z_e) + alpha n', n' ~ N(0, Sigma')."""
     z_up = up(z_end, layout)
@@ -393,13 +394,13 @@ def initial_noise(
     batch: int,
     width: int,
     *,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
     device: torch.device | str | None = None,
     dtype: torch.dtype = torch.float32,
 ) -> Tensor:
     """Pure noise at the coarsest stage's resolution, (B, tokens(K), r)."""
     shape = (batch, config.tokens(config.num_stages), width)
-    return torch.randn(shape, generator=generator, device=device, dtype=dtype)
+    return randn(shape, generator, device=device, dtype=dtype)
 
 
 def sample_pyramid(
@@ -409,7 +410,7 @@ def sample_pyramid(
     *,
     steps: Sequence[int] | None = None,
     method: Method = "euler",
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
     cond: Mapping[str, Any] | None = None,
 ) -> ODESolution:
     """Generate full-resolution latents (Algorithm 1, lines 4-10).

@@ -18,6 +18,7 @@ from typing import Any, NamedTuple
 
 import torch
 
+from umf.flows.noise import Generators, randn
 from umf.flows.paths import (
     TimeDistribution,
     flow_matching_loss,
@@ -133,15 +134,13 @@ def semi_noise_initial_state(
     *,
     reaction_only: bool = False,
     noise: Tensor | None = None,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
 ) -> Tensor:
     """The t = 0 state [eps || C] (or C alone for the reaction-only path)."""
     if reaction_only:
         return context
     if noise is None:
-        noise = torch.randn(
-            context.shape, generator=generator, device=context.device, dtype=context.dtype
-        )
+        noise = randn(context.shape, generator, device=context.device, dtype=context.dtype)
     return torch.cat([noise, context], dim=-1)
 
 
@@ -153,7 +152,7 @@ def sample_semi_noise(
     method: Method = "euler",
     reaction_only: bool = False,
     noise: Tensor | None = None,
-    generator: torch.Generator | None = None,
+    generator: Generators = None,
     cond: Mapping[str, Any] | None = None,
 ) -> ODESolution:
     """Integrate the joint state from t = 0 to 1 once and return the reaction half.

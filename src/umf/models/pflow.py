@@ -24,6 +24,7 @@ from umf.flows import (
     pyramid_training_sample,
     sample_pyramid,
 )
+from umf.flows.noise import Generators
 from umf.models.denoiser import (
     FROM_CONFIG,
     FlowTransformer,
@@ -162,7 +163,7 @@ class PFlow(nn.Module):
         steps: int | Sequence[int] | None = None,
         solver: Method | None = None,
         guidance: GuidanceArg = FROM_CONFIG,
-        generator: torch.Generator | None = None,
+        generator: Generators = None,
     ) -> tuple[Tensor, int]:
         """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) on the VAE's
         scale, and the NFE.

@@ -24,6 +24,7 @@ from umf.flows import (
     semi_noise_loss,
     semi_noise_training_sample,
 )
+from umf.flows.noise import Generators
 from umf.models.context import ContextAdapter
 from umf.models.denoiser import (
     FROM_CONFIG,
@@ -171,7 +172,7 @@ class SFlow(nn.Module):
         steps: int | None = None,
         solver: Method | None = None,
         guidance: GuidanceArg = FROM_CONFIG,
-        generator: torch.Generator | None = None,
+        generator: Generators = None,
     ) -> tuple[Tensor, int]:
         """The next person's latent (B, p, r) and the NFE, integrating the ODE once.
 

@@ -12,6 +12,10 @@ The directory is the unit of atomicity: it is written into a hidden temporary si
 renamed into place, and the previous checkpoint is only removed once the new one is
 complete. A crash between the two renames leaves ``.<name>.old-*``, which loading falls
 back to and the next save restores, so a readable checkpoint always exists.
+
+``keep_previous`` (training's ``last``) keeps the replaced checkpoint as ``<name>.prev``;
+:func:`load_first_good` tries candidates in order and warns when it skips a damaged one,
+so a ``last`` corrupted on disk later is not a dead end.
 """
 
 from __future__ import annotations
@@ -22,10 +26,10 @@ import re
 import shutil
 import tempfile
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
+from typing import Any, TypeVar
 
 import torch
 from safetensors import SafetensorError
@@ -42,6 +46,7 @@ RESERVED = {"normalizer", "format", "config", "trainer_state"}
 _NAME = re.compile(r"^[A-Za-z0-9_][A-Za-z0-9_.-]*$")
 
 StateDict = Mapping[str, torch.Tensor]
+T = TypeVar("T")
 
 
 @dataclass
@@ -77,12 +82,14 @@ def save_checkpoint(
     ema: Mapping[str, Any] | None = None,
     extra: Mapping[str, Any] | None = None,
     dtype: torch.dtype | None = None,
+    keep_previous: bool = False,
 ) -> Path:
     """Write a complete checkpoint directory at ``path`` atomically; returns ``path``.
 
     ``modules`` maps names to modules or state dicts (e.g. EMA weights). ``dtype`` casts
     floating weights (``torch.float16`` to ship); the normaliser always stays fp32.
     ``trainer_state.pt`` is written when any of state/optimizer/scheduler/ema/extra is given.
+    ``keep_previous`` moves the checkpoint it replaces to ``<name>.prev``.
     """
     path = Path(path)
     for name in modules:
@@ -98,7 +105,7 @@ def save_checkpoint(
         if state or optimizer or scheduler or ema or extra:
             torch.save(trainer, tmp / "trainer_state.pt")
             _fsync(tmp / "trainer_state.pt")
-        _swap_in(tmp, path)
+        _swap_in(tmp, path, previous_path(path) if keep_previous else None)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)
         raise
@@ -176,14 +183,24 @@ def _chmod_like_plain_dir(path: Path) -> None:
     os.chmod(path, 0o777 & ~umask)
 
 
-def _swap_in(tmp: Path, path: Path) -> None:
-    """Rename ``tmp`` to ``path``, keeping the old directory until the new one is in place."""
+def previous_path(path: str | os.PathLike) -> Path:
+    """Where ``keep_previous`` keeps the checkpoint a save replaced."""
+    path = Path(path)
+    return path.parent / f"{path.name}.prev"
+
+
+def _swap_in(tmp: Path, path: Path, keep: Path | None = None) -> None:
+    """Rename ``tmp`` to ``path``, keeping the old directory until the new one is in place
+    (and afterwards as ``keep``, when given)."""
     old = None
     if path.exists():
         old = Path(tempfile.mkdtemp(prefix=f".{path.name}.old-", dir=path.parent))
         os.replace(path, old)  # onto an empty directory: allowed on POSIX
     os.replace(tmp, path)
-    if old is not None:
+    if old is not None and keep is not None:
+        shutil.rmtree(keep, ignore_errors=True)
+        os.replace(old, keep)
+    elif old is not None:
         shutil.rmtree(old, ignore_errors=True)
     fd = os.open(path.parent, os.O_RDONLY)
     try:
@@ -278,6 +295,34 @@ def load_checkpoint(
     if trainer_state:
         _read_trainer_state(path, ck, map_location)
     return ck
+
+
+def load_first_good(
+    candidates: Sequence[str | os.PathLike],
+    load: Callable[[Path], T],
+    warn: Callable[[str], None],
+) -> T:
+    """``load`` the first candidate checkpoint that exists and loads without error.
+
+    Skipping a damaged one is a warning naming it; when none loads, the first error is
+    raised (or "no checkpoint" when none exists).
+    """
+    errors: list[UMFError] = []
+    for cand in candidates:
+        found = find_checkpoint(cand)
+        if found is None:
+            continue
+        try:
+            result = load(found)
+        except UMFError as exc:
+            errors.append(exc)
+            continue
+        for err in errors:
+            warn(f"warning: skipped a damaged checkpoint ({err}); using {found}")
+        return result
+    if errors:
+        raise errors[0]
+    raise UMFError(f"no checkpoint at {', '.join(str(c) for c in candidates)}")
 
 
 def read_weights(path: str | os.PathLike, name: str) -> dict[str, torch.Tensor]:

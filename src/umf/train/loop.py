@@ -33,7 +33,14 @@ from umf.config import TrainConfig
 from umf.errors import UMFError
 from umf.io import atomic_path
 from umf.representation import Normalizer
-from umf.train.checkpoint import Checkpoint, find_checkpoint, load_checkpoint, save_checkpoint
+from umf.train.checkpoint import (
+    Checkpoint,
+    find_checkpoint,
+    load_checkpoint,
+    load_first_good,
+    previous_path,
+    save_checkpoint,
+)
 from umf.train.datasets import MixedBatches, ShardedSampler
 
 LAST, BEST = "last", "best"
@@ -397,7 +404,8 @@ def _eval_mode(modules: Sequence[nn.Module]) -> Iterator[None]:
                 m.train(was)
 
 
-def _check_config(cfg: TrainConfig) -> None:
+def check_train_config(cfg: TrainConfig) -> None:
+    """The optimisation settings a run cannot start without."""
     for name in ("max_steps", "log_every", "val_every", "ckpt_every", "batch_size"):
         if getattr(cfg, name) < 1:
             raise UMFError(f"train config: {name} must be >= 1, got {getattr(cfg, name)}")
@@ -574,6 +582,7 @@ class _Run:
                 scheduler=self.scheduler.state_dict() if with_optimizer else None,
                 ema=self.ema.state_dict() if (self.ema is not None and with_optimizer) else None,
                 extra={"stage": extra} if isinstance(extra, dict) else None,
+                keep_previous=name == LAST,  # the previous good `last` survives as last.prev
             )
         self.fabric.barrier()
 
@@ -693,11 +702,11 @@ def train(
     the loaders are re-sharded across ranks here. Checkpoints and resumption assume
     ``out_dir`` is on a file system every rank sees.
     """
-    _check_config(cfg)
+    check_train_config(cfg)
     fabric = _launch(accelerator, devices, num_nodes, strategy, precision)
     out = Path(out_dir)
     say: Log = log if fabric.is_global_zero else (lambda s: None)
-    found = find_checkpoint(out / LAST)
+    found = find_checkpoint(out / LAST) or find_checkpoint(previous_path(out / LAST))
     if found is not None and not resume:
         raise UMFError(f"{out} already has a checkpoint; pass resume or choose another out dir")
     if resume and found is None:
@@ -730,7 +739,12 @@ def _build(
     modules = stage.modules()
     for m in modules.values():
         fabric.to_device(m)
-    ck = load_checkpoint(found, modules, trainer_state=True) if found is not None else None
+    ck = None
+    if found is not None:  # the newest `last`, else the one it replaced (warned about)
+        candidates = [out / LAST, previous_path(out / LAST)]
+        ck = load_first_good(
+            candidates, lambda p: load_checkpoint(p, modules, trainer_state=True), say
+        )
     trainable = stage.trainable()
     trainable.train()
     params = [p for p in trainable.parameters() if p.requires_grad]

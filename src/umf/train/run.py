@@ -18,7 +18,14 @@ import torch
 from umf.config import TrainConfig, UMFConfig, family_config, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
-from umf.train.checkpoint import find_checkpoint, load_checkpoint, read_weights, save_checkpoint
+from umf.train.checkpoint import (
+    find_checkpoint,
+    load_checkpoint,
+    load_first_good,
+    previous_path,
+    read_weights,
+    save_checkpoint,
+)
 from umf.train.datasets import MixedBatches, SceneDataset, SingleMotionDataset, make_loader
 
 STAGES = ("vae", "pflow", "sflow")
@@ -50,7 +57,22 @@ def resolve_config(
         cfg = family_config(family or "small")
     for o in overrides:
         cfg = set_option(cfg, o)
+    check_run_config(cfg)
     return cfg
+
+
+def check_run_config(cfg: UMFConfig) -> None:
+    """Types and ranges of every option and a dry-run build of the model (meta device, no
+    memory), so a bad ``--set`` fails before anything is written to the run directory."""
+    from umf.train.loop import check_train_config
+    from umf.validation import check_model_config
+
+    check_model_config(cfg)
+    for stage in (*STAGES, "evaluator"):
+        try:
+            check_train_config(getattr(cfg, f"train_{stage}"))
+        except UMFError as exc:
+            raise UMFError(f"train_{stage}: {exc}") from exc
 
 
 def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig:
@@ -130,19 +152,25 @@ def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, se
     return fit_body_normalizer(torch.cat(feats), placement_radius=radius)
 
 
-def _load_frozen(path: Path, name: str, module: torch.nn.Module) -> None:
-    ck = find_checkpoint(path)
-    if ck is None:
-        raise UMFError(f"{path}: no {name} checkpoint; train the {name} stage first")
-    load_checkpoint(ck, {name: module})
+def _load_frozen(stage_dir: Path, name: str, module: torch.nn.Module, log=print) -> None:
+    """A trained stage's weights: best, else last, else the last before it (warned about)."""
+    if best_or_last(stage_dir) is None:
+        raise UMFError(f"{stage_dir}: no {name} checkpoint; train the {name} stage first")
+    load_first_good(checkpoint_candidates(stage_dir), lambda p: load_checkpoint(p, {name: module}),
+                    log)  # fmt: skip
 
 
-def best_or_last(stage_dir: Path) -> Path:
-    for sub in ("best", "last"):
-        found = find_checkpoint(stage_dir / sub)
+def checkpoint_candidates(stage_dir: Path) -> list[Path]:
+    """Where a stage's trained weights may be, in order of preference."""
+    return [stage_dir / "best", stage_dir / "last", previous_path(stage_dir / "last")]
+
+
+def best_or_last(stage_dir: Path) -> Path | None:
+    for cand in checkpoint_candidates(stage_dir):
+        found = find_checkpoint(cand)
         if found is not None:
             return found
-    raise UMFError(f"{stage_dir}: no checkpoint; train this stage first")
+    return None
 
 
 def corpus_captions(corpus: Corpus) -> list[str]:
@@ -192,15 +220,15 @@ def train_stage(
     """Train one stage of a run; the flow stages load the run's trained VAE (frozen)."""
     from umf.models.pflow import PFlow
     from umf.models.vae import MotionVAE
-    from umf.train.loop import train
+    from umf.train.loop import check_train_config, train
     from umf.train.stages import PFlowStage, SFlowStage, VAEStage
 
     if stage not in STAGES:
         raise UMFError(f"unknown stage {stage!r} (choose {', '.join(STAGES)})")
+    check_run_config(cfg)
     corpus = Corpus.load(corpus_dir)
-    run_dir.mkdir(parents=True, exist_ok=True)
-    cfg.save_yaml(run_dir / "config.yaml")
     t = _train_cfg(cfg, stage, max_steps)
+    check_train_config(t)
     torch.manual_seed(t.seed)
     normalizer = corpus.normalizer
     if stage == "vae":
@@ -210,7 +238,7 @@ def train_stage(
         st: Any = VAEStage(cfg, normalizer, body_normalizer=body)
     else:
         vae = MotionVAE(cfg.vae)
-        _load_frozen(best_or_last(run_dir / "vae"), "vae", vae)
+        _load_frozen(run_dir / "vae", "vae", vae, log)
         cache = text_cache(cfg, corpus, launch.progress)
         if stage == "pflow":
             st = PFlowStage(cfg, vae, cache, seed=t.seed)
@@ -219,9 +247,12 @@ def train_stage(
             if cfg.sflow.shared_backbone:  # ablation: reuse the trained P-Flow transformer
                 p, r = vae.latent_shape
                 pflow = PFlow(cfg.pflow, p, r, cache.encoder.dim)
-                _load_frozen(best_or_last(run_dir / "pflow"), "pflow", pflow)
+                _load_frozen(run_dir / "pflow", "pflow", pflow, log)
                 backbone = pflow.net
             st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed)
+    # only a config that built its stage is saved: a failed start never poisons the run
+    run_dir.mkdir(parents=True, exist_ok=True)
+    cfg.save_yaml(run_dir / "config.yaml")
     bank_vae = st.vae if stage != "vae" and t.latent_passes > 0 else None
     stats_vae = st.vae if stage != "vae" else None
     train_loader, val_loader, latents = _loaders(stage, corpus, cfg, t, bank_vae,
@@ -238,11 +269,18 @@ def train_stage(
     )  # fmt: skip
 
 
-def export_model(run_dir: Path, out: Path, fp16: bool = True) -> Path:
+def export_model(
+    run_dir: Path, out: Path, fp16: bool = True, log: Callable[[str], None] = print
+) -> Path:
     """One model directory from a run's best checkpoints (what from_pretrained loads)."""
     cfg = UMFConfig.load_yaml(run_dir / "config.yaml")
-    weights = {s: read_weights(best_or_last(run_dir / s), s) for s in STAGES}
-    ck = load_checkpoint(best_or_last(run_dir / "vae"))
+    weights = {}
+    for s in STAGES:
+        if best_or_last(run_dir / s) is None:
+            raise UMFError(f"{run_dir / s}: no checkpoint; train this stage first")
+        weights[s] = load_first_good(checkpoint_candidates(run_dir / s),
+                                     lambda p, s=s: read_weights(p, s), log)  # fmt: skip
+    ck = load_first_good(checkpoint_candidates(run_dir / "vae"), load_checkpoint, log)
     return save_checkpoint(
         out, weights, config=cfg.to_dict(), normalizer=ck.normalizer,
         dtype=torch.float16 if fp16 else None,

@@ -41,6 +41,25 @@ def flatten_scenes(batch: dict[str, Any]) -> tuple[Tensor, Tensor, Tensor]:
     return rows, row_mask, people
 
 
+class DeviceGenerator:
+    """A seeded generator created on the device of the data it draws for (a CPU generator
+    cannot fill a CUDA tensor); moving to another device restarts from the seed."""
+
+    def __init__(self, seed: int) -> None:
+        self.seed = seed
+        self._gen: torch.Generator | None = None
+
+    def on(self, device: torch.device | str) -> torch.Generator | None:
+        from umf.streams import device_generator
+
+        device = torch.device(device)
+        if self._gen is None or self._gen.device != device:
+            if device.type == "meta":
+                return None
+            self._gen = device_generator(self.seed, device)
+        return self._gen
+
+
 def mpjpe(
     x_hat: Tensor, x: Tensor, mask: Tensor, normalizer: Normalizer, root_relative: bool = False
 ) -> Tensor:
@@ -125,7 +144,7 @@ class PFlowStage(_LatentStage):
         super().__init__(config, vae, text)
         p, r = vae.latent_shape
         self.pflow = pflow or PFlow(config.pflow, p, r, text.encoder.dim)
-        self.generator = torch.Generator().manual_seed(seed)
+        self.generator = DeviceGenerator(seed)
 
     def modules(self) -> dict[str, nn.Module]:
         return {"pflow": self.pflow, "vae": self.vae}
@@ -148,13 +167,14 @@ class PFlowStage(_LatentStage):
     def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
         z1, dataset, captions = self._inputs(batch)
         text, uncond = self.encode_text(captions, z1.device)
-        return self.pflow(z1, text, uncond, dataset=dataset, generator=self.generator)
+        gen = self.generator.on(z1.device)
+        return self.pflow(z1, text, uncond, dataset=dataset, generator=gen)
 
     @torch.no_grad()
     def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
         z1, dataset, captions = self._inputs(batch)
         text, uncond = self.encode_text(captions, z1.device)
-        gen = torch.Generator().manual_seed(1234)  # same noise every validation
+        gen = DeviceGenerator(1234).on(z1.device)  # same noise every validation
         return {k: float(v) for k, v in self.pflow.loss(z1, text, uncond, dataset, gen).items()}
 
 
@@ -165,7 +185,7 @@ class SFlowStage(_LatentStage):
         super().__init__(config, vae, text)
         p, r = vae.latent_shape
         self.sflow = sflow or SFlow(config.sflow, p, r, text.encoder.dim, backbone=backbone)
-        self.generator = torch.Generator().manual_seed(seed)
+        self.generator = DeviceGenerator(seed)
 
     def modules(self) -> dict[str, nn.Module]:
         return {"sflow": self.sflow, "vae": self.vae}
@@ -185,21 +205,24 @@ class SFlowStage(_LatentStage):
         b, p_max = present.shape
         # one reacting person per scene: a random index among persons 2..P of that scene
         counts = present.sum(1)
-        k = 1 + (torch.rand(b, generator=self.generator) * (counts - 1).clamp_min(1)).long()
+        device = present.device
+        u = torch.rand(b, generator=self.generator.on(device), device=device)
+        k = 1 + (u * (counts - 1).clamp_min(1)).long()
         k = torch.minimum(k, counts - 1).clamp_min(1)
-        prev_mask = torch.arange(p_max)[None, :] < k[:, None]
-        w = lat[torch.arange(b), k]
+        prev_mask = torch.arange(p_max, device=device)[None, :] < k[:, None]
+        w = lat[torch.arange(b, device=device), k]
         return lat, prev_mask, w, batch["captions"]
 
     def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
         prev, prev_mask, w, captions = self._inputs(batch)
         text, uncond = self.encode_text(captions, w.device)
-        return self.sflow(prev, prev_mask, w, text, uncond, generator=self.generator)
+        gen = self.generator.on(w.device)
+        return self.sflow(prev, prev_mask, w, text, uncond, generator=gen)
 
     @torch.no_grad()
     def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
         prev, prev_mask, w, captions = self._inputs(batch)
         text, uncond = self.encode_text(captions, w.device)
-        gen = torch.Generator().manual_seed(1234)
+        gen = DeviceGenerator(1234).on(w.device)
         losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen)
         return {k: float(v) for k, v in losses.items()}

@@ -1,0 +1,412 @@
+"""One validation layer for generation requests and model configs, run before any model loads.
+
+The CLI and the Python API call the same checks, so a bad value is one clear
+:class:`UMFError` whichever way it came in, and never a traceback after minutes of
+sampling. The bounds are documented in the README ("Generate"); change both together.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import numbers
+import os
+from collections import Counter
+from collections.abc import Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from umf.errors import UMFError
+
+MAX_PEOPLE = 16
+MIN_SECONDS, MAX_SECONDS = 0.5, 10.0
+MAX_SEED = 2**64 - 1
+MAX_GUIDANCE = 20.0
+MAX_FLOW_STEPS = 200  # P-Flow steps of all stages together; S-Flow steps per added person
+MAX_BATCH = 256
+MAX_SCENES = 256  # scenes per call: prompts x batch
+MAX_PROMPT_CHARS = 1000
+# Memory cap: scenes are sampled in chunks of at most this many person-frames (16 scenes of
+# 16 people x 10 s); the result does not depend on the chunking (per-scene random streams).
+CHUNK_PERSON_FRAMES = 16 * 16 * 300
+MIN_BODY_EXTENT = 0.2  # metres: a motion smaller than this in every axis is not a body
+FORMATS = ("npz", "gif", "mp4", "bvh", "glb")
+
+
+@dataclass(frozen=True)
+class Request:
+    """A checked generation request; ``sample_indices[i]`` numbers prompt i's samples."""
+
+    prompts: tuple[str, ...]
+    num_people: int
+    seconds: float
+    seed: int | None
+    guidance: float | None
+    pflow_steps: tuple[int, ...] | None
+    sflow_steps: int | None
+    sample_indices: tuple[int, ...]
+
+
+# --------------------------------------------------------------------- scalars
+def check_int(name: str, value: Any, lo: int, hi: int) -> int:
+    """An integer (not a bool, not 2.5) within [lo, hi]."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Integral):
+        raise UMFError(f"{name} must be an integer, got {value!r}")
+    if not lo <= int(value) <= hi:
+        raise UMFError(f"{name} must be between {lo} and {hi}, got {value}")
+    return int(value)
+
+
+def check_float(name: str, value: Any, lo: float, hi: float) -> float:
+    """A finite real number within [lo, hi] (NaN and infinities are refused by name)."""
+    if isinstance(value, bool) or not isinstance(value, numbers.Real):
+        raise UMFError(f"{name} must be a number, got {value!r}")
+    v = float(value)
+    if not math.isfinite(v):
+        raise UMFError(f"{name} must be a finite number, got {value}")
+    if not lo <= v <= hi:
+        raise UMFError(f"{name} must be between {lo:g} and {hi:g}, got {value}")
+    return v
+
+
+def check_prompts(prompts: Any) -> tuple[str, ...]:
+    """One string or a non-empty sequence of non-empty strings, each of bounded length."""
+    if isinstance(prompts, str):
+        prompts = [prompts]
+    if not isinstance(prompts, Sequence) or isinstance(prompts, bytes):
+        raise UMFError(f"the prompt must be a string or a list of strings, got {prompts!r:.60}")
+    if not prompts:
+        raise UMFError("the prompt is empty")
+    if len(prompts) > MAX_SCENES:
+        raise UMFError(f"at most {MAX_SCENES} prompts per call, got {len(prompts)}")
+    for p in prompts:
+        if not isinstance(p, str):
+            raise UMFError(f"every prompt must be a string, got {p!r:.60}")
+        if not p.strip():
+            raise UMFError("the prompt is empty")
+        if len(p) > MAX_PROMPT_CHARS:
+            raise UMFError(f"a prompt may have at most {MAX_PROMPT_CHARS} characters, got {len(p)}")
+    return tuple(prompts)
+
+
+def check_steps(steps: Any) -> tuple[int, ...] | None:
+    """P-Flow steps per stage (coarse to fine): positive, at most MAX_FLOW_STEPS in all."""
+    if steps is None:
+        return None
+    if isinstance(steps, numbers.Integral) and not isinstance(steps, bool):
+        steps = (steps,)
+    if not isinstance(steps, Sequence) or isinstance(steps, str) or not 1 <= len(steps) <= 8:
+        raise UMFError(f"--steps takes 1 to 8 integers like 45,5, got {steps!r}")
+    values = tuple(check_int("--steps", s, 1, MAX_FLOW_STEPS) for s in steps)
+    if sum(values) > MAX_FLOW_STEPS:
+        raise UMFError(f"--steps may total at most {MAX_FLOW_STEPS}, got {sum(values)}")
+    return values
+
+
+def default_sample_indices(prompts: Sequence[str]) -> tuple[int, ...]:
+    """Each prompt's index among the earlier copies of the same prompt: 0 for the first."""
+    seen: Counter[str] = Counter()
+    out = []
+    for p in prompts:
+        out.append(seen[p])
+        seen[p] += 1
+    return tuple(out)
+
+
+def check_request(
+    prompts: Any,
+    num_people: Any = 2,
+    seconds: Any = 4.0,
+    seed: Any = 0,
+    guidance: Any = None,
+    pflow_steps: Any = None,
+    sflow_steps: Any = None,
+    sample_indices: Any = None,
+) -> Request:
+    """Every model-independent bound of a generation request, checked in one place."""
+    texts = check_prompts(prompts)
+    people = check_int("--people", num_people, 1, MAX_PEOPLE)
+    secs = check_float("--seconds", seconds, MIN_SECONDS, MAX_SECONDS)
+    seed = None if seed is None else check_int("--seed", seed, 0, MAX_SEED)
+    if guidance is not None:
+        guidance = check_float("--guidance", guidance, 0.0, MAX_GUIDANCE)
+    if sflow_steps is not None:
+        sflow_steps = check_int("--sflow-steps", sflow_steps, 1, MAX_FLOW_STEPS)
+    if sample_indices is None:
+        indices = default_sample_indices(texts)
+    else:
+        if isinstance(sample_indices, str | bytes) or not isinstance(sample_indices, Sequence):
+            raise UMFError("sample_indices must be a list of integers, one per prompt")
+        if len(sample_indices) != len(texts):
+            raise UMFError(f"{len(sample_indices)} sample indices for {len(texts)} prompts")
+        indices = tuple(check_int("a sample index", i, 0, 2**31 - 1) for i in sample_indices)
+    steps = check_steps(pflow_steps)
+    return Request(texts, people, secs, seed, guidance, steps, sflow_steps, indices)
+
+
+def check_for_model(req: Request, config: Any, acting: bool = False) -> int:
+    """The bounds that depend on the model (length, stage count); returns the frame count."""
+    stages = config.pflow.num_stages
+    if req.pflow_steps is not None and len(req.pflow_steps) not in (1, stages):
+        raise UMFError(
+            f"--steps needs {stages} count(s) for this model's {stages}-stage pyramid "
+            f"(coarse to fine), got {len(req.pflow_steps)}"
+        )
+    if acting:
+        return 0
+    frames = round(req.seconds * config.fps)
+    if not 15 <= frames <= config.vae.max_frames:
+        lo, hi = 15 / config.fps, config.vae.max_frames / config.fps
+        raise UMFError(f"--seconds must be between {lo:.1f} and {hi:.1f}, got {req.seconds}")
+    return frames
+
+
+def check_batch(batch: Any, prompts: int) -> int:
+    """Scenes per prompt; prompts x batch is capped at MAX_SCENES."""
+    batch = check_int("--batch", batch, 1, MAX_BATCH)
+    if batch * prompts > MAX_SCENES:
+        raise UMFError(
+            f"at most {MAX_SCENES} scenes per command: {prompts} prompt(s) x --batch {batch} "
+            f"is {batch * prompts}"
+        )
+    return batch
+
+
+def check_formats(formats: str) -> list[str]:
+    wanted = [f.strip().lower() for f in formats.split(",") if f.strip()]
+    bad = [f for f in wanted if f not in FORMATS]
+    if bad or not wanted:
+        raise UMFError(f"unknown format {','.join(bad) or formats!r}; choose from {FORMATS}")
+    return list(dict.fromkeys(wanted))
+
+
+def check_out_dir(out: Path) -> Path:
+    """An output directory that exists or can be created; nothing is created here."""
+    if out.exists() and not out.is_dir():
+        raise UMFError(f"--out {out} exists and is not a directory")
+    parent = out
+    while not parent.exists():
+        if parent.parent == parent:
+            break
+        parent = parent.parent
+    if not parent.is_dir():
+        raise UMFError(f"--out {out}: {parent} is not a directory")
+    if not os.access(parent, os.W_OK | os.X_OK):
+        raise UMFError(f"--out {out}: {parent} is not writable")
+    return out
+
+
+def check_targets(paths: Sequence[Path]) -> None:
+    """No output name may be taken by a directory (it could not be replaced)."""
+    for p in paths:
+        if p.is_dir():
+            raise UMFError(f"cannot write {p}: a directory has that name")
+
+
+def check_actor(actor: Any, fps: float, max_frames: int) -> np.ndarray:
+    """Person 1's joints (T, 22, 3): finite, long enough, short enough, and body-sized."""
+    if not isinstance(actor, np.ndarray):
+        raise UMFError(f"the actor motion must be a numpy array, got {type(actor).__name__}")
+    if actor.ndim != 3 or actor.shape[1:] != (22, 3):
+        raise UMFError(f"the actor motion must be (T, 22, 3) joints, got {actor.shape}")
+    most = max_frames + 1
+    if not 16 <= actor.shape[0] <= most:
+        raise UMFError(
+            f"the actor motion must have 16..{most} frames ({16 / fps:.1f}-{most / fps:.1f} s), "
+            f"got {actor.shape[0]}"
+        )
+    if not np.issubdtype(actor.dtype, np.number) or not np.isfinite(actor).all():
+        raise UMFError("the actor motion contains NaN or infinite values")
+    extent = float(np.ptp(actor, axis=1).max())
+    if extent < MIN_BODY_EXTENT:
+        raise UMFError(
+            f"the actor motion spans only {extent:.3f} m: not a body (all joints at one point?)"
+        )
+    return actor
+
+
+def check_finite(x: Any, what: str) -> None:
+    """Refuse non-finite output before anything is written, naming where it came from."""
+    import torch
+
+    ok = torch.isfinite(x).all() if isinstance(x, torch.Tensor) else np.isfinite(x).all()
+    if not bool(ok):
+        raise UMFError(f"non-finite values (NaN or inf) in {what}")
+
+
+def check_device(device: str) -> str:
+    """``cpu``, ``cuda`` or ``cuda:N`` that this machine has (``auto``: cuda when present)."""
+    import torch
+
+    if device == "auto":
+        return "cuda" if torch.cuda.is_available() else "cpu"
+    try:
+        dev = torch.device(device)
+    except (RuntimeError, TypeError) as exc:
+        raise UMFError(f"--device must be auto, cpu or cuda[:i], got {device!r}") from exc
+    if dev.type not in ("cpu", "cuda"):
+        raise UMFError(f"--device must be auto, cpu or cuda[:i], got {device!r}")
+    if dev.type == "cuda":
+        count = torch.cuda.device_count()
+        if count == 0:
+            raise UMFError(f"--device {device}: no CUDA device on this machine")
+        if dev.index is not None and dev.index >= count:
+            raise UMFError(f"--device {device}: this machine has {count} CUDA device(s)")
+    return device
+
+
+def chunk_size(num_people: int, frames: int, budget: int = CHUNK_PERSON_FRAMES) -> int:
+    """Scenes sampled together so that one chunk holds at most ``budget`` person-frames."""
+    return max(1, budget // max(1, num_people * frames))
+
+
+def chunks(n: int, size: int) -> list[range]:
+    """``range(n)`` cut into consecutive pieces of at most ``size``."""
+    return [range(i, min(n, i + size)) for i in range(0, n, size)]
+
+
+# --------------------------------------------------------------------- model configs
+MAX_CONFIG_INT = 1 << 16  # any size or count in a model config (d_model, frames, steps ...)
+MAX_LAYERS = 256
+MAX_MODEL_BYTES = 8 << 30  # parameters and buffers of VAE + P-Flow + S-Flow
+CHOICES = {
+    "layout": ("1d", "2d"),
+    "solver": ("euler", "heun", "rk4"),
+    "encoder": ("minilm", "clip"),
+    "text_encoder": ("minilm", "clip", "clip-tokens"),
+    "family": ("paper", "small"),
+}
+_UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every", "seed"}
+
+
+def _check_value(where: str, kind: str, value: Any) -> None:
+    """One config field against its annotation: types, non-negative, finite, bounded."""
+    optional = "None" in kind
+    if value is None:
+        if not optional:
+            raise UMFError(f"{where} must not be null")
+        return
+    name = where.rsplit(".", 1)[-1]
+    if kind.startswith("tuple"):
+        if not isinstance(value, tuple | list) or not value:
+            raise UMFError(f"{where} must be a non-empty list, got {value!r}")
+        inner = "float" if "float" in kind else "int"
+        for v in value:
+            _check_value(where, inner, v)
+        return
+    if kind.startswith("bool"):
+        if not isinstance(value, bool):
+            raise UMFError(f"{where} must be true or false, got {value!r}")
+    elif kind.startswith("int") and name == "steps":
+        check_int(where, value, 1, MAX_FLOW_STEPS)
+    elif kind.startswith("int"):
+        hi = 2**63 - 1 if name in _UNBOUNDED else MAX_LAYERS if "layers" in name else MAX_CONFIG_INT
+        check_int(where, value, 0, hi)
+    elif kind.startswith("float"):
+        check_float(where, value, -1e9, 1e9)
+    elif kind.startswith("str"):
+        if not isinstance(value, str):
+            raise UMFError(f"{where} must be a string, got {value!r}")
+        if name in CHOICES and value not in CHOICES[name]:
+            raise UMFError(f"{where} must be one of {', '.join(CHOICES[name])}, got {value!r}")
+
+
+def check_config_values(config: Any, prefix: str = "") -> None:
+    """Every field of a (nested) config dataclass: right type, finite, in range."""
+    for f in dataclasses.fields(config):
+        value = getattr(config, f.name)
+        where = f"{prefix}{f.name}"
+        if dataclasses.is_dataclass(value):
+            check_config_values(value, where + ".")
+        else:
+            _check_value(where, str(f.type), value)
+    if not prefix:
+        check_float("fps", config.fps, 1.0, 1000.0)
+        if config.vae.max_frames < 15:
+            raise UMFError(f"vae.max_frames must be at least 15, got {config.vae.max_frames}")
+
+
+class _TextDim:
+    """Stands in for the text encoder where only its width matters (dry-run builds)."""
+
+    def __init__(self, dim: int) -> None:
+        self.dim = dim
+
+
+def dry_run_build(config: Any, text_dim: int = 384) -> dict[str, Any]:
+    """Build VAE, P-Flow and S-Flow on the ``meta`` device (no memory) and return them.
+
+    Catches configs that cannot be built (heads not dividing widths, token counts the
+    pyramid cannot halve ...) and ones too big to allocate, before anything is allocated.
+    """
+    import torch
+
+    from umf.pipeline import UMFPipeline
+    from umf.representation import Normalizer
+
+    try:
+        with torch.device("meta"):
+            norm = Normalizer(torch.zeros(262), torch.ones(262))
+            pipe = UMFPipeline.build(config, norm, _TextDim(text_dim))
+    except UMFError:
+        raise
+    except Exception as exc:  # construction raises many types for bad sizes
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UMFError(f"the model config cannot be built: {msg}") from exc
+    modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
+    total = sum(
+        t.numel() * t.element_size()
+        for m in modules.values()
+        for t in [*m.parameters(), *m.buffers()]
+    )
+    if total > MAX_MODEL_BYTES:
+        raise UMFError(
+            f"the model config describes {total / 2**30:.1f} GiB of weights "
+            f"(at most {MAX_MODEL_BYTES / 2**30:.0f} GiB)"
+        )
+    return modules
+
+
+def check_model_config(config: Any, text_dim: int = 384) -> dict[str, Any]:
+    """Values first (types, ranges), then a dry-run build; returns the meta modules."""
+    check_config_values(config)
+    return dry_run_build(config, text_dim)
+
+
+def check_weight_shapes(path: Path, modules: dict[str, Any]) -> None:
+    """Each module file's tensor shapes against the (meta) modules, reading headers only."""
+    from safetensors import safe_open
+
+    for name, module in modules.items():
+        f = path / f"{name}.safetensors"
+        if not f.exists():
+            raise UMFError(f"{path}: missing module file {f.name}")
+        try:
+            with safe_open(str(f), framework="pt") as fh:
+                shapes = {k: tuple(fh.get_slice(k).get_shape()) for k in fh.keys()}
+        except Exception as exc:  # safetensors raises several types for a damaged header
+            raise UMFError(f"{f}: corrupt module file ({type(exc).__name__})") from exc
+        for key, t in module.state_dict().items():
+            if key in shapes and shapes[key] != tuple(t.shape):
+                raise UMFError(
+                    f"{path}: tensor {name}.{key} has shape {shapes[key]} in the checkpoint "
+                    f"but {tuple(t.shape)} in config.json"
+                )
+
+
+def check_model_weights(modules: dict[str, Any], normalizer: Any, path: Path) -> None:
+    """Loaded weights and normaliser must be finite, the normaliser's std positive."""
+    import torch
+
+    for name, module in modules.items():
+        for key, t in module.state_dict().items():
+            if t.is_floating_point() and not bool(torch.isfinite(t).all()):
+                raise UMFError(f"{path}: weights {name}.{key} contain NaN or infinite values")
+    mean, std = normalizer.mean, normalizer.std
+    if not bool(torch.isfinite(mean).all() & torch.isfinite(std).all()):
+        raise UMFError(f"{path}: the normaliser contains NaN or infinite values")
+    if not bool((std > 0).all()):
+        raise UMFError(f"{path}: the normaliser has a zero or negative std")
