@@ -323,7 +323,7 @@ def small_config() -> UMFConfig:
             ckpt_every=200,
         ),
         train_pflow=TrainConfig(max_steps=1000, **flow_train),
-        train_sflow=TrainConfig(max_steps=1000, **flow_train),
+        train_sflow=TrainConfig(max_steps=500, **flow_train),
         evaluator=evaluator,
         train_evaluator=train_evaluator,
     )
