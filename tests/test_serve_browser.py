@@ -70,7 +70,7 @@ def browsed(served, tmp_path_factory):
     out = tmp_path_factory.mktemp("browser")
     env = {**os.environ, "PLAYWRIGHT_CORE": str(PLAYWRIGHT), "CHROMIUM": str(CHROMIUM)}
     r = subprocess.run(["node", str(DRIVER), served, str(out)], capture_output=True, text=True,
-                       env=env, timeout=180)  # fmt: skip
+                       env=env, timeout=900)  # fmt: skip
     assert r.returncode == 0, r.stderr[-3000:]
     result = json.loads((out / "result.json").read_text())
     print(f"first scene shown {result['click_to_scene_s']:.1f} s after the click; "

@@ -42,6 +42,7 @@ async function main() {
     page.on("console", (msg) => { if (msg.type() === "error") errors.push(msg.text()); });
     page.on("pageerror", (err) => errors.push(String(err)));
     page.on("requestfailed", (req) => errors.push(`request failed: ${req.url()}`));
+    page.setDefaultTimeout(600000); // a busy 2-core machine may be very slow; normal runs take seconds
     await page.goto(url);
     await page.waitForFunction(() => document.getElementById("status-text").textContent !== "Starting…");
 
@@ -50,7 +51,7 @@ async function main() {
     await page.fill("#seed", "0");
     const clicked = Date.now();
     await page.click("#generate");
-    await page.waitForSelector("body[data-scene]", { timeout: 120000 });
+    await page.waitForSelector("body[data-scene]", { timeout: 600000 });
     result.click_to_scene_s = (Date.now() - clicked) / 1000;
     result.page_click_to_scene_s = await page.evaluate(() => document.body.dataset.clickToScene);
 
