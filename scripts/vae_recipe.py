@@ -49,11 +49,10 @@ def load_vae(path: Path) -> tuple[MotionVAE, UMFConfig]:
 
 def wrists_above_head(features: list[np.ndarray]) -> float:
     """Median over clips of the highest (lower wrist - head) height, metres."""
-    vals = []
-    for f in features:
-        j = f[:, :66].reshape(-1, 22, 3)
-        vals.append((np.minimum(j[:, 20, 1], j[:, 21, 1]) - j[:, 15, 1]).max())
-    return float(np.median(vals))
+    from umf.eval.motion_stats import motion_statistics
+
+    stats = [motion_statistics(f[:, :66].reshape(-1, 22, 3)) for f in features]
+    return float(np.median([st["both_wrists_above_head"] for st in stats]))
 
 
 def protocol(evaluator, items, recon, replications: int = 5) -> dict[str, float]:

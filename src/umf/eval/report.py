@@ -818,7 +818,8 @@ def reconstruction_section(corpus: Corpus, contenders: Sequence[Contender]) -> d
     from umf.eval.reconstruction import reconstruct, reconstruction_metrics
 
     items = corpus_items(corpus, "test", "single")
-    real = [it.features[0][: c.max_frames] for it in items for c in contenders[:1]]
+    most = contenders[0].max_frames
+    real = [it.features[0][:most] for it in items]
     out: dict[str, Any] = {}
     for c in contenders:
         rec = reconstruct(c.pipe.vae, c.pipe.normalizer, real)

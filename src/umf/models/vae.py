@@ -226,10 +226,14 @@ class MotionVAE(nn.Module):
 
     def encode(self, x: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
         """x (B, T, 262) normalised, mask (B, T) True = valid -> mu, logvar (B, p, r)."""
+        return self._encode_space(self._input_space(x, mask), mask)
+
+    def _input_space(self, x: Tensor, mask: Tensor) -> Tensor:
+        """Checked normalised input (padding zeroed) in the VAE's own space."""
         if x.dim() != 3 or x.shape[-1] != self.cfg.feature_dim:
             raise ValueError(f"expected x (B, T, {self.cfg.feature_dim}), got {tuple(x.shape)}")
         self._check_mask(mask, x.shape[0])
-        return self._encode_space(self.to_space(x.masked_fill(~mask[..., None], 0.0)), mask)
+        return self.to_space(x.masked_fill(~mask[..., None], 0.0))
 
     def _encode_space(self, y: Tensor, mask: Tensor) -> tuple[Tensor, Tensor]:
         b = y.shape[0]
@@ -271,10 +275,7 @@ class MotionVAE(nn.Module):
         sample: bool = True,
         generator: torch.Generator | None = None,
     ) -> VAEOutput:
-        if x.dim() != 3 or x.shape[-1] != self.cfg.feature_dim:
-            raise ValueError(f"expected x (B, T, {self.cfg.feature_dim}), got {tuple(x.shape)}")
-        self._check_mask(mask, x.shape[0])
-        y = self.to_space(x.masked_fill(~mask[..., None], 0.0))
+        y = self._input_space(x, mask)
         mu, logvar = self._encode_space(y, mask)
         z = reparameterize(mu, logvar, generator) if sample else mu
         y_hat = self._decode_space(z, mask)
