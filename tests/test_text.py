@@ -344,3 +344,21 @@ def test_head_gradients_and_paper_defaults(clip):
     assert paper(*_random_batch([3, 7], 384, 7)).shape == (2, 512)
     with pytest.raises(ValueError, match="max_len"):
         head(*_random_batch([20], clip.dim, 20))
+
+
+def test_cache_only_encoder_reads_a_cache_built_elsewhere(clip, tmp_path):
+    """A node without the encoder's weights trains from the cache and its encoder.json."""
+    from umf.text import CachedTextEncoder
+
+    texts = ["hello", "", "wave hello"]
+    built = TextFeatureCache(clip, tmp_path).encode(texts)
+    CachedTextEncoder.write(tmp_path, clip)
+    offline_enc = CachedTextEncoder.load(tmp_path)
+    assert (offline_enc.name, offline_enc.identity, offline_enc.dim) == (
+        clip.name, clip.identity, clip.dim)  # fmt: skip
+    _assert_same(TextFeatureCache(offline_enc, tmp_path).encode(texts), built)
+    with pytest.raises(UMFError, match="not in the text cache"):
+        TextFeatureCache(offline_enc, tmp_path).encode(["a prompt nobody encoded"])
+    (tmp_path / "encoder.json").write_text("{broken")
+    with pytest.raises(UMFError, match="encoder.json"):
+        CachedTextEncoder.load(tmp_path)

@@ -287,6 +287,51 @@ def build_text_encoder(
     raise UMFError(f"unknown text encoder {name!r}: expected 'minilm' or 'clip'")
 
 
+class CachedTextEncoder:
+    """Stands in for a frozen encoder whose weights are not installed (a GPU node without
+    the encoder package, say): every prompt must already be in a text cache built where
+    the encoder was; a new prompt is an error. ``encoder.json`` in the cache names it."""
+
+    MANIFEST = "encoder.json"
+
+    def __init__(self, name: str, identity: str, dim: int):
+        self.name, self.identity, self._dim = name, identity, dim
+
+    @property
+    def dim(self) -> int:
+        return self._dim
+
+    @property
+    def device(self) -> torch.device:
+        return torch.device("cpu")
+
+    @classmethod
+    def load(cls, cache_dir: str | os.PathLike) -> CachedTextEncoder:
+        path = Path(cache_dir) / cls.MANIFEST
+        try:
+            m = json.loads(path.read_text())
+            return cls(str(m["name"]), str(m["identity"]), int(m["dim"]))
+        except (OSError, ValueError, KeyError, TypeError) as exc:
+            raise UMFError(f"{path}: cannot read the text cache's encoder ({exc})") from exc
+
+    @staticmethod
+    def write(cache_dir: str | os.PathLike, encoder: FrozenTextEncoder) -> None:
+        """Record which encoder filled ``cache_dir`` (read by :meth:`load`)."""
+        data = {"name": encoder.name, "identity": encoder.identity, "dim": encoder.dim}
+        path = Path(cache_dir) / CachedTextEncoder.MANIFEST
+        path.parent.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_suffix(".tmp")
+        tmp.write_text(json.dumps(data, indent=1))
+        os.replace(tmp, path)
+
+    def encode(self, texts: list[str]) -> TextFeatures:
+        first = texts[0] if texts else ""
+        raise UMFError(
+            f"{len(texts)} prompt(s) are not in the text cache and the {self.name} encoder "
+            f"is not installed (first: {first!r})"
+        )
+
+
 class TextFeatureCache:
     """Memoises frozen features per unique prompt, in memory and optionally on disk.
 
@@ -296,7 +341,11 @@ class TextFeatureCache:
     the encoder identity and the prompt, so a different encoder never reads them.
     """
 
-    def __init__(self, encoder: FrozenTextEncoder, cache_dir: str | os.PathLike | None = None):
+    def __init__(
+        self,
+        encoder: FrozenTextEncoder | CachedTextEncoder,
+        cache_dir: str | os.PathLike | None = None,
+    ):
         self.encoder = encoder
         self.cache_dir = Path(cache_dir) if cache_dir is not None else None
         self._memory: dict[str, tuple[Tensor, Tensor]] = {}

@@ -26,22 +26,26 @@ def build_bank(
     batch_size: int = 64,
     progress: bool = True,
     desc: str = "latents",
+    device: str | torch.device = "cpu",
+    num_workers: int = 0,
 ) -> dict[str, Any]:
     """Encode ``passes`` epochs of ``dataset`` (single or scene items) with ``vae``.
 
     Returns ``z`` (N, P, p, r) posterior means, ``people_mask`` (N, P), ``dataset`` (N,)
-    and ``captions`` (N). Single-person items have P = 1.
+    and ``captions`` (N), on the CPU. Single-person items have P = 1. ``device`` runs the
+    encoder there (the VAE is moved back to where it was afterwards).
     """
-    vae.eval()
+    home = next(vae.parameters()).device
+    vae.eval().to(device)
     zs, masks, datasets, captions = [], [], [], []
     total = passes * len(dataset)
     bar = tqdm(total=total, desc=desc, unit="crop", disable=not progress)
     for epoch in range(passes):
         dataset.set_epoch(epoch)
         loader = DataLoader(dataset, batch_size=batch_size, shuffle=False,
-                            collate_fn=dataset.collate)  # fmt: skip
+                            collate_fn=dataset.collate, num_workers=num_workers)  # fmt: skip
         for batch in loader:
-            feats, mask = batch["features"], batch["mask"]
+            feats, mask = batch["features"].to(device), batch["mask"].to(device)
             if feats.dim() == 3:
                 mu, _ = vae.encode(feats, mask)
                 z, people = mu[:, None], torch.ones(feats.shape[0], 1, dtype=torch.bool)
@@ -49,16 +53,17 @@ def build_bank(
                 b, p = batch["people_mask"].shape
                 rows = feats.flatten(0, 1)
                 rows_mask = mask[:, None, :].expand(b, p, -1).flatten(0, 1)
-                rows_mask = rows_mask & batch["people_mask"].flatten()[:, None]
+                rows_mask = rows_mask & batch["people_mask"].to(device).flatten()[:, None]
                 rows_mask[:, 0] = True  # empty slots: encode a dummy frame, masked below
                 mu, _ = vae.encode(rows, rows_mask)
                 z, people = mu.reshape(b, p, *mu.shape[1:]), batch["people_mask"]
-            zs.append(z)
+            zs.append(z.cpu())
             masks.append(people)
             datasets.append(torch.as_tensor(batch["dataset"], dtype=torch.long).reshape(-1))
             captions.extend(batch["captions"])
             bar.update(feats.shape[0])
     bar.close()
+    vae.to(home)
     p_max = max(z.shape[1] for z in zs)
     z = torch.cat([_pad_people(z, p_max) for z in zs])
     people = torch.cat([_pad_people(m, p_max) for m in masks])

@@ -83,7 +83,7 @@ def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig
 
 
 def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=None,
-             progress: bool = True, stats_vae=None):  # fmt: skip
+             progress: bool = True, stats_vae=None, bank_device: str = "cpu"):  # fmt: skip
     """(train, val, latents) of a stage.
 
     VAE and P-Flow alternate single-person and scene batches (SPEC 6), S-Flow sees scenes
@@ -99,6 +99,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
     most = min(t.max_frames, cfg.vae.max_frames)
     frames = dict(min_frames=min(t.min_frames, most), max_frames=most)
     latents: list = []
+    bank_kw = dict(device=bank_device, num_workers=t.num_workers, progress=progress)
 
     def loader(kind: str, split: str):
         train = split == "train"
@@ -112,16 +113,16 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         bank = None
         if vae is not None:
             passes = t.latent_passes if train else 1
-            bank = build_bank(vae, ds, passes, progress=progress, desc=f"latents {kind} {split}")
+            bank = build_bank(vae, ds, passes, desc=f"latents {kind} {split}", **bank_kw)
         elif train and stats_vae is not None:
-            bank = build_bank(stats_vae, ds, 1, progress=progress, desc=f"latent stats {kind}")
+            bank = build_bank(stats_vae, ds, 1, desc=f"latent stats {kind}", **bank_kw)
         if train and stats_vae is not None:
             z, present = bank["z"], bank["people_mask"]
             latents.append(z[:, 0] if stage == "pflow" else z[present])
         if vae is not None:
             ds = LatentBankDataset(bank, first_person_only=(stage == "pflow"))
-        return make_loader(ds, t.batch_size, shuffle=train, num_workers=t.num_workers,
-                           seed=t.seed)  # fmt: skip
+        workers = 0 if vae is not None else t.num_workers  # bank items need no workers
+        return make_loader(ds, t.batch_size, shuffle=train, num_workers=workers, seed=t.seed)
 
     if stage == "sflow":
         train, val = loader("scene", "train"), loader("scene", "val")
@@ -129,6 +130,12 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         train = MixedBatches(loader("single", "train"), loader("scene", "train"))
         val = MixedBatches(loader("single", "val"), loader("scene", "val"))
     return train, val, (torch.cat(latents) if latents else None)
+
+
+def bank_device(launch: Launch) -> str:
+    """Where latent banks are encoded: the training GPU when there is one."""
+    wants_gpu = launch.accelerator in ("gpu", "cuda", "auto")
+    return "cuda" if wants_gpu and torch.cuda.is_available() else "cpu"
 
 
 def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, seed: int = 0):
@@ -195,14 +202,26 @@ def text_cache(cfg: UMFConfig, corpus: Corpus, progress: bool = True):
     """
     from tqdm import tqdm
 
-    from umf.text import TextFeatureCache, build_text_encoder
+    from umf.text import CachedTextEncoder, TextFeatureCache, build_text_encoder
 
-    enc = build_text_encoder(cfg.text.encoder, cfg.text.path, max_length=cfg.text.max_length)
-    cache = TextFeatureCache(enc, cache_dir=corpus.root / "text-cache")
+    cache_dir = corpus.root / "text-cache"
+    try:
+        enc = build_text_encoder(cfg.text.encoder, cfg.text.path, max_length=cfg.text.max_length)
+    except UMFError:
+        # a node without the encoder's weights trains from a cache built elsewhere
+        if not (cache_dir / CachedTextEncoder.MANIFEST).exists():
+            raise
+        enc = CachedTextEncoder.load(cache_dir)
+        if enc.name != cfg.text.encoder.lower():
+            raise UMFError(f"{cache_dir}: text cache of {enc.name!r}, the config asks for "
+                           f"{cfg.text.encoder!r}") from None  # fmt: skip
+    cache = TextFeatureCache(enc, cache_dir=cache_dir)
     texts = corpus_captions(corpus)
     chunk = 256
     for i in tqdm(range(0, len(texts), chunk), desc="text features", disable=not progress):
         cache.encode(texts[i : i + chunk])
+    if not isinstance(enc, CachedTextEncoder):
+        CachedTextEncoder.write(cache_dir, enc)
     return cache
 
 
@@ -255,8 +274,8 @@ def train_stage(
     cfg.save_yaml(run_dir / "config.yaml")
     bank_vae = st.vae if stage != "vae" and t.latent_passes > 0 else None
     stats_vae = st.vae if stage != "vae" else None
-    train_loader, val_loader, latents = _loaders(stage, corpus, cfg, t, bank_vae,
-                                                 launch.progress, stats_vae)  # fmt: skip
+    train_loader, val_loader, latents = _loaders(stage, corpus, cfg, t, bank_vae, launch.progress,
+                                                 stats_vae, bank_device(launch))  # fmt: skip
     if latents is not None:  # a resumed run restores the same statistics from its checkpoint
         st.trainable().latent_norm.fit(latents)
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")

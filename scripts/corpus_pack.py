@@ -1,0 +1,167 @@
+"""Pack a prepared corpus (and its text cache) small enough to carry to a training machine.
+
+A GPU node often has neither the raw motion archives nor the text encoder's weights, and
+what can be copied to it may be capped. ``pack`` stores the corpus's joints (1 mm steps)
+and rotations (5e-4 steps, under 0.02 degree) as per-clip time differences compressed with
+LZMA (about 10x smaller than ``clips.npz``), and the text cache's features in float16;
+``unpack`` rebuilds a corpus directory that ``Corpus.load`` and ``umf train`` read, with
+the cache's ``encoder.json`` so training runs without the encoder installed.
+
+    python scripts/corpus_pack.py pack out/corpus .gpu              # motion.npz, text.npz
+    python scripts/corpus_pack.py unpack .gpu out/corpus            # on the other machine
+    python scripts/corpus_pack.py check out/corpus out/unpacked     # largest differences
+"""
+
+from __future__ import annotations
+
+import json
+import lzma
+import sys
+from pathlib import Path
+
+import numpy as np
+
+JOINT_STEP = 1e-3  # metres
+ROT_STEP = 5e-4  # rotation-matrix entries (error under 0.02 degree)
+CORPUS_FILES = ("manifest.json", "scenes.json", "normalizer.safetensors", "clips.json")
+
+
+def _track_starts(index: list[dict]) -> np.ndarray:
+    """Row of each person's first frame in the concatenated arrays."""
+    starts, pos = [], 0
+    for e in index:
+        for _ in range(e["num_people"]):
+            starts.append(pos)
+            pos += e["num_frames"]
+    return np.asarray(starts, dtype=np.int64)
+
+
+def encode_tracks(x: np.ndarray, step: float, starts: np.ndarray) -> bytes:
+    """Quantise, take differences along time within each track, compress (channel-major)."""
+    q = np.round(x.reshape(len(x), -1) / step).astype(np.int64)
+    d = q.copy()
+    d[1:] -= q[:-1]
+    d[starts] = q[starts]
+    if np.abs(d).max() >= 2**15:
+        raise ValueError("a frame-to-frame change does not fit in int16; use a coarser step")
+    return lzma.compress(np.ascontiguousarray(d.T.astype(np.int16)).tobytes(), preset=6)
+
+
+def decode_tracks(blob: bytes, shape: tuple[int, ...], step: float, starts: np.ndarray):
+    n = shape[0]
+    d = np.frombuffer(lzma.decompress(blob), dtype=np.int16).reshape(-1, n).T.astype(np.int64)
+    ends = np.append(starts[1:], n)
+    q = np.empty_like(d)
+    for s, e in zip(starts, ends, strict=True):
+        q[s:e] = np.cumsum(d[s:e], axis=0)
+    return (q * step).astype(np.float32).reshape(shape)
+
+
+def pack(corpus: Path, out: Path) -> None:
+    out.mkdir(parents=True, exist_ok=True)
+    with np.load(corpus / "clips.npz") as z:
+        joints, rot6d, index_s = z["joints"], z["rot6d"], str(z["index"])
+    starts = _track_starts(json.loads(index_s))
+    files = {f: _z((corpus / f).read_bytes()) for f in CORPUS_FILES if (corpus / f).exists()}
+    np.savez(
+        out / "motion.npz",
+        joints=np.frombuffer(encode_tracks(joints, JOINT_STEP, starts), np.uint8),
+        rot6d=np.frombuffer(encode_tracks(rot6d, ROT_STEP, starts), np.uint8),
+        shapes=np.array(json.dumps({"joints": joints.shape, "rot6d": rot6d.shape})),
+        index=_z(index_s.encode()),
+        names=np.array(json.dumps(list(files))),
+        **{f"file{i}": v for i, v in enumerate(files.values())},
+    )
+    _pack_text(corpus, out / "text.npz")
+
+
+def _z(data: bytes) -> np.ndarray:
+    return np.frombuffer(lzma.compress(data, preset=6), np.uint8)
+
+
+def _unz(a: np.ndarray) -> bytes:
+    return lzma.decompress(a.tobytes())
+
+
+def _pack_text(corpus: Path, out: Path) -> None:
+    """The cached features of every caption training asks for (nothing else)."""
+    from safetensors import safe_open
+
+    from umf.data.corpus import Corpus
+    from umf.text import CachedTextEncoder, TextFeatureCache
+    from umf.train.run import corpus_captions
+
+    cache = corpus / "text-cache"
+    if not (cache / "encoder.json").exists():
+        raise SystemExit(f"{cache}: no encoder.json (train a flow stage once to write it)")
+    lookup = TextFeatureCache(CachedTextEncoder.load(cache), cache)
+    rel, meta, tokens, pooled, lengths = [], [], [], [], []
+    for text in corpus_captions(Corpus.load(corpus)):
+        path = lookup._file(text)
+        if not path.exists():
+            raise SystemExit(f"{cache}: no features for {text!r}; run the flow stage once")
+        with safe_open(str(path), framework="numpy") as fh:
+            rel.append(str(path.relative_to(cache)))
+            meta.append(fh.metadata())
+            t = fh.get_tensor("tokens")
+            tokens.append(t.astype(np.float16))
+            pooled.append(fh.get_tensor("pooled").astype(np.float16))
+            lengths.append(t.shape[0])
+    blob = lzma.compress(np.concatenate(tokens).tobytes() + np.stack(pooled).tobytes(), preset=6)
+    np.savez(
+        out, blob=np.frombuffer(blob, np.uint8), lengths=np.asarray(lengths),
+        dim=np.asarray(pooled[0].shape[0]), rel=np.array(json.dumps(rel)),
+        meta=np.array(json.dumps(meta)), encoder=np.array((cache / "encoder.json").read_text()),
+    )  # fmt: skip
+
+
+def unpack(packed: Path, corpus: Path) -> None:
+    """Whichever of motion.npz and text.npz ``packed`` holds (they may travel apart)."""
+    corpus.mkdir(parents=True, exist_ok=True)
+    if (packed / "motion.npz").exists():
+        _unpack_motion(packed / "motion.npz", corpus)
+    if (packed / "text.npz").exists():
+        _unpack_text(packed / "text.npz", corpus / "text-cache")
+
+
+def _unpack_motion(packed: Path, corpus: Path) -> None:
+    with np.load(packed) as z:
+        shapes = json.loads(str(z["shapes"]))
+        index_s = _unz(z["index"]).decode()
+        starts = _track_starts(json.loads(index_s))
+        joints = decode_tracks(z["joints"].tobytes(), tuple(shapes["joints"]), JOINT_STEP, starts)
+        rot6d = decode_tracks(z["rot6d"].tobytes(), tuple(shapes["rot6d"]), ROT_STEP, starts)
+        for i, name in enumerate(json.loads(str(z["names"]))):
+            (corpus / name).write_bytes(_unz(z[f"file{i}"]))
+    np.savez(corpus / "clips.npz", joints=joints, rot6d=rot6d, index=np.array(index_s))
+
+
+def _unpack_text(packed: Path, cache: Path) -> None:
+    from safetensors.numpy import save_file
+
+    with np.load(packed) as z:
+        lengths, dim = z["lengths"], int(z["dim"])
+        raw = lzma.decompress(z["blob"].tobytes())
+        n_tok = int(lengths.sum())
+        tokens = np.frombuffer(raw[: n_tok * dim * 2], np.float16).reshape(n_tok, dim)
+        pooled = np.frombuffer(raw[n_tok * dim * 2 :], np.float16).reshape(-1, dim)
+        offsets = np.concatenate([[0], np.cumsum(lengths)])
+        for i, (rel, meta) in enumerate(zip(json.loads(str(z["rel"])), json.loads(str(z["meta"])),
+                                            strict=True)):  # fmt: skip
+            path = cache / rel
+            path.parent.mkdir(parents=True, exist_ok=True)
+            arrays = {"tokens": tokens[offsets[i] : offsets[i + 1]].astype(np.float32),
+                      "pooled": pooled[i].astype(np.float32)}  # fmt: skip
+            save_file(arrays, str(path), metadata=meta)
+        (cache / "encoder.json").write_text(str(z["encoder"]))
+
+
+def check(a: Path, b: Path) -> None:
+    with np.load(a / "clips.npz") as za, np.load(b / "clips.npz") as zb:
+        for k in ("joints", "rot6d"):
+            print(f"{k}: max |difference| {np.abs(za[k] - zb[k]).max():.2e}")
+
+
+if __name__ == "__main__":
+    cmd, src, dst = sys.argv[1:4]
+    {"pack": pack, "unpack": unpack, "check": check}[cmd](Path(src), Path(dst))
