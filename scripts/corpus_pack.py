@@ -93,7 +93,8 @@ def _pack_text(corpus: Path, out: Path) -> None:
 
     cache = corpus / "text-cache"
     if not (cache / "encoder.json").exists():
-        raise SystemExit(f"{cache}: no encoder.json (train a flow stage once to write it)")
+        print(f"{cache}: no encoder.json (a flow stage writes it): text features not packed")
+        return
     lookup = TextFeatureCache(CachedTextEncoder.load(cache), cache)
     rel, meta, tokens, pooled, lengths = [], [], [], [], []
     for text in corpus_captions(Corpus.load(corpus)):
