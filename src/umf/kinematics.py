@@ -27,6 +27,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
+from itertools import pairwise
 
 import numpy as np
 import torch
@@ -172,7 +173,7 @@ def pin_targets(
         disp[start:stop] = path[start:stop].mean(axis=0) - path[start:stop]
         strength[start:stop] = 1.0
     edges = [(None, runs[0][0])] if runs else []
-    edges += [(a[1], b[0]) for a, b in zip(runs, runs[1:], strict=False)]
+    edges += [(a[1], b[0]) for a, b in pairwise(runs)]
     edges += [(runs[-1][1], None)] if runs else []
     for after, before in edges:  # gap frames [after, before) between runs
         lo = 0 if after is None else after
