@@ -237,7 +237,7 @@ def test_sampling_and_a_training_step_run_on_device(device, generator_spy):
 def test_corrupt_last_falls_back_to_the_previous_one(tmp_path):
     from torch import nn
 
-    from umf.train.checkpoint import load_checkpoint, load_first_good, save_checkpoint
+    from umf.checkpoint import load_checkpoint, load_first_good, save_checkpoint
 
     net = nn.Linear(3, 2)
     for step in (1, 2):
