@@ -55,9 +55,9 @@ PIN_WEIGHT = 4.0  # a planted foot joint counts this many times a free joint
 PIN_BLEND = 4  # frames over which a pin fades in before / out after its contact run
 PIN_REACH = 0.08  # m: a pin lets go where the decoded foot slides further than this
 PIN_GAP = 4  # frames between a let-go pin and the next one (2 makes the feet jitter)
-ITERATIONS = 6  # Levenberg-Marquardt steps; the error stops falling after about 4
+ITERATIONS = 4  # Levenberg-Marquardt steps; the error stops falling after 2 to 4
 DAMPING = 1e-3  # m^2 per rad^2: keeps unobservable twists where inverse kinematics put them
-BLOCK = 2048  # person-frames per batched solve (bounds the Jacobians' memory)
+BLOCK = 4096  # person-frames per batched solve (bounds the memory of the normal equations)
 
 # Joints whose rotation moves something (the others are leaves: feet, head, wrists).
 DRIVERS = tuple(j for j in range(NUM_JOINTS) if CHILDREN[j])
@@ -228,6 +228,26 @@ def _skew(v: Tensor) -> Tensor:
     return torch.stack([o, -z, y, z, o, -x, -y, x, o], dim=-1).reshape(*v.shape, 3)
 
 
+def normal_equations(pos: Tensor, res: Tensor, weight: Tensor) -> tuple[Tensor, Tensor]:
+    """J^T W J (B, 3 + 3D, 3 + 3D) and J^T W r (B, 3 + 3D) of one Gauss-Newton step.
+
+    ``pos`` (B, 22, 3) joints, ``res`` (B, 22, 3) target - joints, ``weight`` (B, 22).
+    Unknowns: the root shift t and a world rotation vector w_j per driver j (turning j's
+    subtree about joint j), so dp_k = t + sum over drivers j above k of w_j x (p_k - p_j):
+    the Jacobian's (k, j) block is -[p_k - p_j]x. In float32: a step needs no more, and
+    batched float32 matrix products are the fastest way through (poses stay float64).
+    """
+    b = pos.shape[0]
+    below = torch.from_numpy(_BELOW).to(pos)
+    lever = (pos[:, :, None, :] - pos[:, None, list(DRIVERS), :]) * below[None, :, :, None]
+    j_rot = -_skew(lever.float()).permute(0, 1, 3, 2, 4).reshape(b, 66, 3 * len(DRIVERS))
+    j_root = torch.eye(3).repeat(NUM_JOINTS, 1).expand(b, -1, -1)
+    jac = torch.cat([j_root, j_rot], dim=-1)  # (B, 66, 3 + 3D)
+    w = weight.float().repeat_interleave(3, dim=-1)[..., None]  # (B, 66, 1)
+    jtw = jac.transpose(1, 2) * w.transpose(1, 2)
+    return jtw @ jac, (jtw @ res.float().reshape(b, -1, 1))[..., 0]
+
+
 def _cost(local: Tensor, root: Tensor, offsets: Tensor, target: Tensor, weight: Tensor) -> Tensor:
     """Weighted squared distance (B,) of each pose's FK to its targets."""
     pos = forward_kinematics(local, root, offsets)
@@ -238,27 +258,14 @@ def _lm_step(
     local: Tensor, root: Tensor, offsets: Tensor, target: Tensor, weight: Tensor, damping: Tensor
 ) -> tuple[Tensor, Tensor]:
     """One damped Gauss-Newton step for B poses: local (B, 22, 3, 3), root (B, 3),
-    offsets (B, 22, 3), target (B, 22, 3), weight (B, 22), damping (B,).
-
-    Unknowns per pose: the root shift and a world-frame rotation vector w_j per driver j,
-    turning j's subtree about joint j: dp_k = sum over drivers j above k of w_j x (p_k - p_j).
-    The normal equations are solved in float32 (a step needs no more); poses stay float64.
-    """
-    b = local.shape[0]
-    below = torch.from_numpy(_BELOW).to(local)
+    offsets (B, 22, 3), target (B, 22, 3), weight (B, 22), damping (B,)."""
     glob = global_rotations(local)
     pos = forward_kinematics(local, root, offsets)
-    lever = (pos[:, :, None, :] - pos[:, None, list(DRIVERS), :]) * below[None, :, :, None]
-    j_rot = -_skew(lever.float()).permute(0, 1, 3, 2, 4).reshape(b, 66, 3 * len(DRIVERS))
-    j_root = torch.eye(3).repeat(NUM_JOINTS, 1).expand(b, -1, -1)
-    jac = torch.cat([j_root, j_rot], dim=-1)  # (B, 66, 3 + 3D)
-    w = weight.float().repeat_interleave(3, dim=-1)[..., None]  # (B, 66, 1)
-    res = (target - pos).float().reshape(b, -1, 1)
-    normal = jac.transpose(1, 2) @ (w * jac)
+    normal, grad = normal_equations(pos, target - pos, weight)
     normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[-1])
     chol = torch.linalg.cholesky(normal)
-    step = torch.cholesky_solve(jac.transpose(1, 2) @ (w * res), chol)[..., 0].to(local)
-    omega = step[:, 3:].reshape(b, len(DRIVERS), 3)
+    step = torch.cholesky_solve(grad[..., None], chol)[..., 0].to(local)
+    omega = step[:, 3:].reshape(len(step), len(DRIVERS), 3)
     # a driver's new global rotation turns by everything at or above it (first order)
     total = torch.einsum("ad,bac->bdc", torch.from_numpy(_UPTO).to(local), omega)
     new_glob = glob.clone()
