@@ -24,7 +24,7 @@ from test_export_glb import _VALIDATE_JS, _validator_package, skin_joint_positio
 from umf.exports import FORMATS
 from umf.skeleton import JOINT_NAMES, PARENTS
 
-ALL = list(FORMATS)
+ALL = [f for f in FORMATS if f != "mp4"]  # the MP4 writer is checked by spying (encoding costs)
 MM = 1e-3
 BOW = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh"
 # SMPL's 24-joint tree (pelvis ... right hand), written out independently of umf
@@ -43,8 +43,8 @@ def pipe():
 def scenes(pipe):
     from umf.data.motion_file import load_motion
 
-    three = pipe("Three people walk side by side.", num_people=3, seconds=3.0, seed=0)[0]
-    actor = load_motion(BOW).joints[0][:91]
+    three = pipe("Three people walk side by side.", num_people=3, seconds=2.0, seed=0)[0]
+    actor = load_motion(BOW).joints[0][:61]
     react = pipe("One person bows and the other bows back.", num_people=2, seed=0, actor=actor)[0]
     return {"three": three, "react": react, "actor": actor}
 
@@ -107,7 +107,7 @@ def test_scenes_are_one_rigid_motion(scenes):
         generated = s.joints[1:] if name == "react" else s.joints
         assert generated[..., 1].min() >= s.meta["floor"] - 1e-5
     react, actor = scenes["react"], scenes["actor"]
-    assert np.abs(react.joints[0] - actor[:90]).max() < 1e-4
+    assert np.abs(react.joints[0] - actor[:60]).max() < 1e-4
 
 
 # --------------------------------------------------------------------- every format
@@ -173,8 +173,10 @@ def test_video_draws_the_scene_joints(written, monkeypatch, tmp_path):
         return Path(path)
 
     monkeypatch.setattr(umf.render, "render_animation", spy)
-    scene.save(tmp_path / "v", "mp4")
-    err = np.abs(seen["joints"] - scene.joints).max()
+    err = 0.0
+    for fmt in ("gif", "mp4"):
+        scene.save(tmp_path / "v", fmt)
+        err = max(err, np.abs(seen.pop("joints") - scene.joints).max())
     _report(name, "gif/mp4", err)
     assert err == 0.0
 
