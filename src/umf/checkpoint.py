@@ -94,8 +94,8 @@ def save_checkpoint(
     model's display name) goes into ``format.json``.
     """
     path = Path(path)
-    for name in modules:
-        _check_name(name)
+    for module_name in modules:
+        _check_name(module_name)
     path.parent.mkdir(parents=True, exist_ok=True)
     recover(path)
     tmp = Path(tempfile.mkdtemp(prefix=f".{path.name}.tmp-", dir=path.parent))
