@@ -12,9 +12,10 @@ SMPL and HumanML3D files then all hold this one motion.
    branching joints' children their mean offset in the joint's frame), or the default body;
 2. rotations: :func:`umf.skeleton.inverse_kinematics`: every bone points where the decoded
    one does, so the errors are only the bone-length differences, summed along a chain;
-3. refinement: a few damped Gauss-Newton (Levenberg-Marquardt) steps on the root position
+3. refinement: a few damped Gauss-Newton (Levenberg-Marquardt) steps on the pelvis height
    and every joint's rotation toward target positions, so those length errors no longer
-   add up along chains. Targets are the decoded positions, except where a foot's contact
+   add up along chains (the pelvis keeps its decoded horizontal path, so where people
+   stand, and :mod:`umf.separation`'s spacing, do not change). Targets are the decoded positions, except where a foot's contact
    label says it is planted: there the ankle / toe is pinned to one spot (the mean of the
    contact run; blended in and out over a few frames), and no target is below the floor;
 4. floor: a frame whose lowest joint is still under the floor is lifted onto it.
@@ -57,6 +58,7 @@ PIN_REACH = 0.08  # m: a pin lets go where the decoded foot slides further than 
 PIN_GAP = 4  # frames between a let-go pin and the next one (2 makes the feet jitter)
 ITERATIONS = 4  # Levenberg-Marquardt steps; the error stops falling after 2 to 4
 DAMPING = 1e-3  # m^2 per rad^2: keeps unobservable twists where inverse kinematics put them
+PINNED_DAMPING = 1e9  # on the pelvis' horizontal shift: where people stand stays decoded
 BLOCK = 4096  # person-frames per batched solve (bounds the memory of the normal equations)
 
 # Joints whose rotation moves something (the others are leaves: feet, head, wrists).
@@ -263,6 +265,7 @@ def _lm_step(
     pos = forward_kinematics(local, root, offsets)
     normal, grad = normal_equations(pos, target - pos, weight)
     normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[-1])
+    normal[:, [0, 2], [0, 2]] += PINNED_DAMPING  # the pelvis keeps its horizontal path
     chol = torch.linalg.cholesky(normal)
     step = torch.cholesky_solve(grad[..., None], chol)[..., 0].to(local)
     omega = step[:, 3:].reshape(len(step), len(DRIVERS), 3)
