@@ -108,7 +108,7 @@ def test_scene_files_are_all_or_nothing(pipe, tmp_path, monkeypatch):
     def broken(*a, **k):
         raise OSError("disk full")
 
-    monkeypatch.setattr(type(other), "save_glb", broken)
+    monkeypatch.setattr("umf.exports.gltf.write", broken)  # the GLB format's writer
     with pytest.raises(OSError):
         write_scene_files(other, stem, ["npz", "bvh", "glb"])
     assert {p.name: p.read_bytes() for p in stem.parent.iterdir()} == before  # old set whole
