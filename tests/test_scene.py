@@ -112,3 +112,32 @@ def test_pipeline_fit_flag(tmp_path, fake_text):
     assert raw.bodies is None and fitted.bodies is not None
     assert fitted.meta["floor"] == 0.0
     assert fitted.joints[..., 1].min() >= -1e-5  # nobody in the floor
+
+
+def test_cli_writes_smpl_and_humanml3d(tmp_path, fake_text, monkeypatch, capsys):
+    """`umf generate --format smpl,humanml3d` (in process, the tiny model): every file it
+    names exists; an unknown format is one line, exit 1 (the bad value) or 2, no file."""
+    from umf.cli.main import run
+
+    model = save_tiny_model(tmp_path / "tiny")
+    out = tmp_path / "gen"
+    with pytest.raises(SystemExit) as code:
+        run(["generate", "two people wave", "--people", "2", "--seconds", "1", "--format",
+             "smpl,humanml3d", "--out", str(out), "--model", str(model)])  # fmt: skip
+    assert code.value.code == 0
+    printed = [line.removeprefix("wrote ") for line in capsys.readouterr().out.splitlines()]
+    names = sorted(p.split("/")[-1] for p in printed)
+    assert names == [
+        "00-two-people-wave-p1.humanml3d.npz",
+        "00-two-people-wave-p1.smpl.npz",
+        "00-two-people-wave-p2.humanml3d.npz",
+        "00-two-people-wave-p2.smpl.npz",
+    ]
+    with np.load(out / "00-two-people-wave-p2.smpl.npz") as z:
+        assert z["poses"].shape == (30, 156)
+    with pytest.raises(SystemExit) as code:
+        run(["generate", "x", "--format", "smpl,fbx", "--out", str(tmp_path / "bad"),
+             "--model", str(model)])  # fmt: skip
+    err = capsys.readouterr().err.strip().splitlines()
+    assert code.value.code == 1 and len(err) == 1 and err[0].startswith("umf: error:")
+    assert not (tmp_path / "bad").exists()
