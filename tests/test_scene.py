@@ -141,3 +141,11 @@ def test_cli_writes_smpl_and_humanml3d(tmp_path, fake_text, monkeypatch, capsys)
     err = capsys.readouterr().err.strip().splitlines()
     assert code.value.code == 1 and len(err) == 1 and err[0].startswith("umf: error:")
     assert not (tmp_path / "bad").exists()
+
+
+def test_dataset_clip_becomes_a_scene(bandai_clips, tmp_path):
+    clip = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001")
+    scene = clip.to_scene()
+    assert scene.meta["id"] == clip.id and scene.text == clip.captions[0]
+    assert np.abs(scene.joints - clip.joints).max() < 1e-5
+    assert [p.name for p in scene.save(tmp_path / "bow", "bvh")] == ["bow-p1.bvh"]

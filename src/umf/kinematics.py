@@ -1,6 +1,6 @@
 """One rigid body per person: the motion every export writes.
 
-Decoded joints stretch their bones over time (by up to 9 cm within one generated person),
+Decoded joints stretch their bones over time (by 6-26 cm within one generated person),
 while BVH, glTF and SMPL carry a rigid skeleton. A scene is therefore fitted once: each
 person gets one set of bone lengths, and its joints become the forward kinematics (FK) of a
 root path and local rotations, kept close to the decoded positions. NPZ, BVH, GLB, video,
@@ -15,9 +15,11 @@ SMPL and HumanML3D files then all hold this one motion.
 3. refinement: a few damped Gauss-Newton (Levenberg-Marquardt) steps on the pelvis height
    and every joint's rotation toward target positions, so those length errors no longer
    add up along chains (the pelvis keeps its decoded horizontal path, so where people
-   stand, and :mod:`umf.separation`'s spacing, do not change). Targets are the decoded positions, except where a foot's contact
-   label says it is planted: there the ankle / toe is pinned to one spot (the mean of the
-   contact run; blended in and out over a few frames), and no target is below the floor;
+   stand, and :mod:`umf.separation`'s spacing, do not change). Targets are the decoded
+   positions, except where a foot's contact label says it is planted (and it is low
+   enough): there the ankle / toe is pinned to one spot (the mean of the run, while the
+   decoded foot stays within PIN_REACH of where it landed; blended in and out over a few
+   frames), and no target is below the floor;
 4. floor: a frame whose lowest joint is still under the floor is lifted onto it.
 
 Clean-up (pins and floor) applies to generated people; a user's own motion (``clean``
