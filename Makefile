@@ -28,7 +28,7 @@ install: $(STAMP)
 # reaction to a real captured bow (person 1 from a BVH file, the others generated).
 demo: $(STAMP)
 	$(BIN)/umf generate "three people walk side by side" --people 3 --seconds 4 --seed 0 \
-		--format npz,gif,mp4,bvh,glb --out $(OUT)/demo
+		--format npz,gif,mp4,bvh,glb,smpl,humanml3d --out $(OUT)/demo
 	$(BIN)/umf react "two people bow to each other" --people 2 --seed 0 \
 		--actor data/bandai-sample/Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh \
 		--format npz,gif,glb --out $(OUT)/demo

@@ -31,7 +31,7 @@ from umf.data.corpus import Corpus
 from umf.eval.protocol import ProtocolConfig, corpus_items, embed_motions, embed_texts, set_metrics
 from umf.eval.reconstruction import reconstruct, reconstruction_metrics
 from umf.models.vae import MotionVAE
-from umf.train.checkpoint import load_checkpoint
+from umf.checkpoint import load_checkpoint
 from umf.train.run import best_or_last
 
 

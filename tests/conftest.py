@@ -104,9 +104,9 @@ def tiny_config():
 
 def save_tiny_model(out: Path, seed: int = 0) -> Path:
     """An untrained tiny UMF model directory (what `umf train export` writes), in a second."""
+    from umf.checkpoint import save_checkpoint
     from umf.pipeline import UMFPipeline
     from umf.representation import Normalizer
-    from umf.train.checkpoint import save_checkpoint
 
     torch.manual_seed(seed)
     cfg = tiny_config()

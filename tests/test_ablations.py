@@ -80,8 +80,8 @@ def test_ablation_trains_and_samples(name):
 def test_shared_backbone_model_loads_the_fine_tuned_transformer_for_both_flows(tmp_path):
     """S-Flow training fine-tunes the shared transformer, so a loaded model must run P-Flow
     with S-Flow's copy of it (the P-Flow checkpoint still holds the pre-S-Flow weights)."""
+    from umf.checkpoint import save_checkpoint
     from umf.pipeline import UMFPipeline
-    from umf.train.checkpoint import save_checkpoint
 
     cfg = small_config()
     for o in (*TINY_MODEL, "sflow.shared_backbone=true"):

@@ -18,6 +18,7 @@ import torch
 from typer.testing import CliRunner
 
 from conftest import TINY_MODEL, prepare_fixture_corpus
+from umf.checkpoint import save_checkpoint
 from umf.cli.main import app, run
 from umf.config import EvaluatorConfig, set_option, small_config
 from umf.data.corpus import Corpus
@@ -25,7 +26,6 @@ from umf.errors import UMFError
 from umf.eval import report as R
 from umf.eval.evaluator import MotionTextEvaluator, evaluator_config_dict
 from umf.pipeline import UMFPipeline
-from umf.train.checkpoint import save_checkpoint
 
 TINY_EVALUATOR = EvaluatorConfig(
     d_model=16, num_layers=1, num_heads=2, ff_dim=32, dropout=0.0, embed_dim=8, text_width=16,

@@ -42,7 +42,7 @@ def test_frame_rate_is_resampled_to_30(real_joints, tmp_path):
     joints = real_joints.numpy()[:61].astype(np.float32)
     _write(tmp_path / "a.bvh", joints, 1.0, 60.0)  # the same frames, played twice as fast
     m = load_motion(tmp_path / "a.bvh")
-    assert m.source_fps == pytest.approx(60.0)
+    assert m.meta["source_fps"] == pytest.approx(60.0)
     assert m.joints.shape[1] == 31  # 1 s at 60 fps = 1 s at 30 fps
     assert np.abs(m.joints[0] - joints[::2]).max() < 1e-4
 

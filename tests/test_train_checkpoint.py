@@ -4,9 +4,9 @@ import pytest
 import torch
 from torch import nn
 
+from umf import checkpoint as C
 from umf.errors import UMFError
 from umf.representation import FEATURE_DIM, Normalizer
-from umf.train import checkpoint as C
 
 
 def _net(seed: int = 0, width: int = 16) -> nn.Module:

@@ -13,10 +13,10 @@ from torch import nn
 from torch.utils.data import DataLoader, Dataset
 
 from conftest import BANDAI_FIXTURE
+from umf.checkpoint import load_checkpoint, read_weights
 from umf.config import TrainConfig
 from umf.errors import UMFError
 from umf.train import datasets as D
-from umf.train.checkpoint import load_checkpoint, read_weights
 from umf.train.loop import lr_at, read_metrics, train
 
 TESTS = Path(__file__).resolve().parent

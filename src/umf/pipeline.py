@@ -4,27 +4,28 @@
 2. For i = 2..N the context adapter pools the latents of everybody generated so far and
    S-Flow integrates from that context to person i's latent (one ODE pass).
 3. The VAE decodes every latent into 262-d features, hence joints.
+4. Each person becomes one rigid body (:mod:`umf.kinematics`): fitted bone lengths, local
+   rotations refined towards the decoded joints, planted feet pinned, nobody in the floor.
 
 :class:`UMFPipeline` holds the frozen text encoder, the VAE, P-Flow, S-Flow and the
-normaliser, and returns :class:`Scene` objects. ``UMFPipeline.from_pretrained(dir)``
-loads a model directory written by ``umf train``.
+normaliser, and returns :class:`umf.scene.Scene` objects. ``UMFPipeline.from_pretrained(dir)``
+loads a model directory written by ``umf train`` or :meth:`UMFPipeline.save_pretrained`.
 """
 
 from __future__ import annotations
 
 import json
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 import torch
 
-from umf import __version__
 from umf.config import UMFConfig
 from umf.errors import UMFError
+from umf.kinematics import fit_bodies
 from umf.representation import (
+    CONTACT,
     Normalizer,
     RigidTransform,
     assemble_features,
@@ -34,6 +35,7 @@ from umf.representation import (
     joints_to_rot6d,
     transform_features,
 )
+from umf.scene import Scene
 from umf.separation import separate_people
 from umf.streams import fresh_seed, scene_generators
 from umf.validation import (
@@ -51,86 +53,7 @@ from umf.validation import (
     dry_run_build,
 )
 
-__all__ = ["MAX_PEOPLE", "Scene", "UMFPipeline", "default_model_dir"]
-
-
-@dataclass
-class Scene:
-    """N people's generated (or given) motion, in person 1's frame (Y up, metres)."""
-
-    joints: np.ndarray  # (N, T, 22, 3)
-    features: np.ndarray  # (N, T, 262), de-normalised
-    text: str
-    fps: float
-    seed: int | None = None
-    model: str = ""
-    meta: dict[str, Any] = field(default_factory=dict)
-
-    @property
-    def num_people(self) -> int:
-        return int(self.joints.shape[0])
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.joints.shape[1])
-
-    def rotations(self) -> np.ndarray:
-        """Local joint rotations (N, T, 22, 3, 3): joints 1..21 from the features' 6-D
-        slots, the root from the joints (inverse kinematics); what BVH/glTF exports use."""
-        from umf.representation import features_to_local_rotations
-        from umf.skeleton import inverse_kinematics
-
-        feats = torch.from_numpy(self.features)
-        local = features_to_local_rotations(feats)
-        root = inverse_kinematics(torch.from_numpy(self.joints))[..., :1, :, :]
-        return torch.cat([root.to(local), local], dim=-3).numpy()
-
-    def save_npz(self, path: str | Path) -> Path:
-        from umf.io import save_npz_atomic
-
-        save_npz_atomic(
-            path,
-            joints=self.joints.astype(np.float32),
-            features=self.features.astype(np.float32),
-            text=np.array(self.text),
-            fps=np.array(self.fps, dtype=np.float32),
-            seed=np.array(-1 if self.seed is None else self.seed),
-            model_version=np.array(self.model),
-            umf_version=np.array(__version__),
-        )
-        return Path(path)
-
-    def save_bvh(self, path_pattern: str | Path) -> list[Path]:
-        """One SMPL-22 BVH per person (metres, shared scene frame); ``{i}`` in the name is
-        replaced by the person number. Rotations come from inverse kinematics against each
-        person's own bone lengths, so forward kinematics reproduces the joints."""
-        from umf.data.bvh import write_smpl22_bvh
-        from umf.skeleton import fit_offsets, inverse_kinematics
-
-        out = []
-        for i, person in enumerate(torch.from_numpy(self.joints).double(), start=1):
-            offsets = fit_offsets(person)
-            local = inverse_kinematics(person, offsets)
-            # only the file name, and not str.format: directories may hold braces
-            pattern = Path(path_pattern)
-            path = pattern.parent / pattern.name.replace("{i}", str(i))
-            write_smpl22_bvh(path, local.numpy(), person[:, 0].numpy(), offsets.numpy(),
-                             self.fps)  # fmt: skip
-            out.append(path)
-        return out
-
-    def save_glb(self, path: str | Path) -> Path:
-        """The whole scene as one glTF binary: a skinned, animated skeleton per person,
-        posed by the same inverse kinematics as :meth:`save_bvh`; written atomically."""
-        from umf.exports.gltf import write_glb
-
-        extras = {"seed": self.seed, "model": self.model}
-        return write_glb(path, self.joints, self.fps, text=self.text, extras=extras)
-
-    def render(self, path: str | Path, **kwargs: Any) -> Path:
-        from umf.render import render_animation
-
-        return render_animation(self.joints, path, caption=self.text, fps=self.fps, **kwargs)
+__all__ = ["MAX_PEOPLE", "Scene", "UMFPipeline", "default_model_dir"]  # Scene: umf.scene
 
 
 class UMFPipeline:
@@ -186,8 +109,8 @@ class UMFPipeline:
         against the weight files' headers) before anything is allocated, and the loaded
         weights and normaliser must be finite.
         """
+        from umf.checkpoint import load_checkpoint, read_info
         from umf.text import build_text_encoder
-        from umf.train.checkpoint import load_checkpoint, read_info
 
         path = Path(path) if path is not None else default_model_dir()
         if not path.is_dir():
@@ -222,6 +145,16 @@ class UMFPipeline:
             m.float().eval()
         return pipe
 
+    def save_pretrained(self, path: str | Path, name: str | None = None) -> Path:
+        """Write this model as a directory :meth:`from_pretrained` reads (the checkpoint
+        format of :mod:`umf.checkpoint`: config, VAE, P-Flow, S-Flow, normaliser), in
+        float32, atomically (a failure leaves no, or the previous, directory)."""
+        from umf.checkpoint import save_checkpoint
+
+        modules = {"vae": self.vae, "pflow": self.pflow, "sflow": self.sflow}
+        return save_checkpoint(path, modules, config=self.config.to_dict(),
+                               normalizer=self.normalizer, name=name or self.name)  # fmt: skip
+
     def to(self, device: str | torch.device) -> UMFPipeline:
         self.device = torch.device(device)
         for m in (self.vae, self.pflow, self.sflow):
@@ -251,6 +184,7 @@ class UMFPipeline:
         actor: np.ndarray | None = None,
         separate: bool = True,
         sample_indices: Sequence[int] | None = None,
+        fit: bool = True,
     ) -> list[Scene]:
         """Generate one scene per prompt (batched).
 
@@ -271,6 +205,13 @@ class UMFPipeline:
         paths come closer than 0.5 m to someone generated before them
         (:mod:`umf.separation`); the motions themselves are untouched and the shifts are
         in ``scene.meta["shifts"]``. Evaluation turns it off to score the raw model.
+
+        ``fit`` (default) makes each person one rigid body (:mod:`umf.kinematics`, once per
+        scene): ``scene.joints`` is its forward kinematics, what every export writes, with
+        planted feet pinned and everyone kept off the floor (the actor of a reaction is
+        only fitted); the decoded positions stay in ``scene.raw_joints``. ``fit=False``
+        (evaluation: no inverse kinematics for thousands of scenes) returns the decoded
+        positions as ``joints``; such a scene's files fit a copy when written.
         """
         req = check_request(prompts, num_people, seconds, seed, guidance, pflow_steps,
                             sflow_steps, sample_indices)  # fmt: skip
@@ -283,7 +224,7 @@ class UMFPipeline:
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
             indices = [req.sample_indices[i] for i in part]
-            scenes += self._sample(texts, indices, req, seed, actor, separate)
+            scenes += self._sample(texts, indices, req, seed, actor, separate, fit)
         return scenes
 
     def _sample(
@@ -294,6 +235,7 @@ class UMFPipeline:
         seed: int,
         actor: np.ndarray | None,
         separate: bool,
+        fit: bool = True,
     ) -> list[Scene]:
         """One chunk of scenes, each drawing its noise from its own stream."""
         num_people, guidance = req.num_people, req.guidance
@@ -351,19 +293,22 @@ class UMFPipeline:
             feats[..., :66] = feats[..., :66] + offset[:, :, None, :]
         joints = features_to_joints(feats)
         check_finite(joints, "the generated joints")
-        meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people}
-        return [
-            Scene(
-                joints[i].cpu().numpy(),
-                feats[i].cpu().numpy(),
-                prompts[i],
-                self.config.fps,
-                seed,
-                self.name,
-                {**meta, "shifts": shifts[i].tolist(), "sample_index": indices[i]},
-            )
-            for i in range(b)
-        ]
+        # the floor: y = 0 in the canonical frame, the actor's lowest joint in theirs
+        floor = 0.0 if frame is None else float(frame.origin[1])
+        meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people, "floor": floor}
+        scenes = []
+        for i in range(b):
+            raw = joints[i].cpu().numpy()
+            f = feats[i].cpu().numpy()
+            bodies = None
+            if fit:
+                clean = [frame is None or k > 0 for k in range(num_people)]  # not the actor
+                bodies = fit_bodies(raw, f[..., CONTACT], floor, clean)
+            extra = {"shifts": shifts[i].tolist(), "sample_index": indices[i]}
+            scenes.append(Scene(raw if bodies is None else bodies.joints(), f, prompts[i],
+                                self.config.fps, seed, self.name, {**meta, **extra}, raw,
+                                bodies, fit=False))  # fmt: skip
+        return scenes
 
     def decode(self, z: torch.Tensor, num_frames: int) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262)."""

@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from umf.errors import UMFError
+from umf.exports import FORMATS as EXPORT_FORMATS
 
 MAX_PEOPLE = 16
 MIN_SECONDS, MAX_SECONDS = 0.5, 10.0
@@ -33,7 +34,7 @@ MAX_PROMPT_CHARS = 1000
 # 16 people x 10 s); the result does not depend on the chunking (per-scene random streams).
 CHUNK_PERSON_FRAMES = 16 * 16 * 300
 MIN_BODY_EXTENT = 0.2  # metres: a motion smaller than this in every axis is not a body
-FORMATS = ("npz", "gif", "mp4", "bvh", "glb")
+FORMATS = tuple(EXPORT_FORMATS)  # npz, bvh, glb, gif, mp4, smpl, humanml3d
 
 
 @dataclass(frozen=True)

@@ -19,6 +19,7 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from umf.exports import FORMATS, targets, write_formats
 from umf.validation import check_finite, check_targets
 
 TMP_PREFIX = ".umf-tmp-"
@@ -28,35 +29,23 @@ STALE_AFTER_S = 600.0  # older hidden temporaries of the single-file writer are 
 
 
 def scene_targets(stem: Path, wanted: Sequence[str], num_people: int) -> list[Path]:
-    """The final paths of one scene: ``stem.<ext>``, and ``stem-p<i>.bvh`` per person."""
+    """The final paths of one scene: ``stem.<ext>``, and ``stem-p<i><suffix>`` for the
+    formats with one file per person (:mod:`umf.exports`)."""
+    return targets(stem, wanted, num_people)
+
+
+def _stale_people(stem: Path, wanted: Sequence[str], num_people: int) -> list[Path]:
+    """Per-person files of people an earlier, larger scene under this name had and this
+    one lacks (for the per-person formats being written)."""
     out = []
-    for ext in ("npz", "bvh", "glb", "gif", "mp4"):
-        if ext not in wanted:
+    for name in wanted:
+        fmt = FORMATS[name]
+        if not fmt.per_person:
             continue
-        if ext == "bvh":
-            out += [stem.parent / f"{stem.name}-p{i}.bvh" for i in range(1, num_people + 1)]
-        else:
-            out.append(stem.parent / f"{stem.name}.{ext}")
+        found = stem.parent.glob(f"{glob_escape(stem.name)}-p*{glob_escape(fmt.suffix)}")
+        pattern = re.compile(re.escape(stem.name) + r"-p(\d+)" + re.escape(fmt.suffix) + "$")
+        out += [p for p in found if (m := pattern.match(p.name)) and int(m.group(1)) > num_people]
     return out
-
-
-def _write_formats(scene: Any, stem: Path, wanted: Sequence[str]) -> None:
-    if "npz" in wanted:
-        scene.save_npz(stem.parent / f"{stem.name}.npz")
-    if "bvh" in wanted:
-        scene.save_bvh(stem.parent / f"{stem.name}-p{{i}}.bvh")
-    if "glb" in wanted:
-        scene.save_glb(stem.parent / f"{stem.name}.glb")
-    for ext in ("gif", "mp4"):
-        if ext in wanted:
-            scene.render(stem.parent / f"{stem.name}.{ext}", progress=False)
-
-
-def _stale_people(stem: Path, num_people: int) -> list[Path]:
-    """BVH files of people an earlier, larger scene under this name had and this one lacks."""
-    found = stem.parent.glob(f"{glob_escape(stem.name)}-p*.bvh")
-    pattern = re.compile(re.escape(stem.name) + r"-p(\d+)\.bvh$")
-    return [p for p in found if (m := pattern.match(p.name)) and int(m.group(1)) > num_people]
 
 
 def glob_escape(name: str) -> str:
@@ -76,19 +65,20 @@ def _commit(tmp: Path, out_dir: Path, remove: Sequence[Path] = ()) -> None:
 def write_scene_files(scene: Any, stem: Path, wanted: Sequence[str]) -> list[Path]:
     """Every requested file of one scene, all or none; returns the paths written."""
     check_finite(scene.joints, "the scene's joints")
-    check_finite(scene.features, "the scene's features")
+    if scene.features is not None:
+        check_finite(scene.features, "the scene's features")
     targets = scene_targets(stem, wanted, scene.num_people)
     check_targets(targets)
     out_dir = stem.parent
     out_dir.mkdir(parents=True, exist_ok=True)
     tmp = Path(tempfile.mkdtemp(prefix=f"{TMP_PREFIX}{os.getpid()}-", dir=out_dir))
     try:
-        _write_formats(scene, tmp / stem.name, wanted)
+        write_formats(scene, tmp / stem.name, wanted)
         names = sorted(p.name for p in tmp.iterdir())
         if names != sorted(p.name for p in targets):  # a writer left out or added a file
             raise RuntimeError(f"scene writer produced {names}")
         (tmp / COMPLETE).touch()
-        stale = _stale_people(stem, scene.num_people) if "bvh" in wanted else []
+        stale = _stale_people(stem, wanted, scene.num_people)
         _commit(tmp, out_dir, stale)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

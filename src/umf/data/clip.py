@@ -48,3 +48,12 @@ class MotionClip:
     @property
     def num_frames(self) -> int:
         return int(self.joints.shape[1])
+
+    def to_scene(self):
+        """The clip as a :class:`umf.scene.Scene` (fitted to rigid bodies), to view or
+        write in any format; the dataset labels go into ``meta``."""
+        from umf.scene import Scene
+
+        meta = {**self.meta, "id": self.id, "source": self.source, "split": self.split}
+        return Scene(self.joints, None, self.captions[0] if self.captions else "", self.fps,
+                     meta=meta)  # fmt: skip

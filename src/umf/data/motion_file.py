@@ -1,19 +1,21 @@
-"""Read a user's motion file as SMPL-22 joints: umf ``.npz`` scenes and ``.bvh`` files.
+"""Read a user's motion file as a :class:`umf.scene.Scene`: umf ``.npz`` scenes and ``.bvh``.
 
 What ``umf react --actor`` and ``umf data show`` accept. BVH files may be on our SMPL-22
 hierarchy (what ``umf generate --format bvh`` writes) or on the Bandai skeleton, at any
 frame rate and in metres, centimetres, millimetres or inches: the unit is the one that
-makes the body about as tall as a person, and the motion is resampled to 30 fps.
+makes the body about as tall as a person, and the motion is resampled to 30 fps. The
+result is the same container as a generated scene (fitted to one rigid body per person,
+which leaves a rigid skeleton's joints as they are), so it can be written in any format.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from umf.errors import UMFError
+from umf.scene import Scene
 
 FPS = 30.0
 # Candidate units of a BVH file, in metres per unit.
@@ -21,21 +23,7 @@ UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
 PERSON_HEIGHT = 1.5  # metres: head-to-toe joint span of an adult, what a unit guess aims for
 
 
-@dataclass
-class Motion:
-    """People (P, T, 22, 3) in metres at 30 fps, Y up, plus a caption when the file has one."""
-
-    joints: np.ndarray
-    text: str
-    source_fps: float
-
-    @property
-    def num_people(self) -> int:
-        return int(self.joints.shape[0])
-
-    @property
-    def num_frames(self) -> int:
-        return int(self.joints.shape[1])
+Motion = Scene  # what load_motion returned before scenes and motion files were one class
 
 
 def guess_unit(joints: np.ndarray) -> float:
@@ -92,8 +80,9 @@ def _load_bvh(path: Path) -> tuple[np.ndarray, float]:
     return joints[None].astype(np.float32), 1.0 / bvh.frame_time
 
 
-def load_motion(path: str | Path) -> Motion:
-    """Joints of every person in ``path`` (.npz or .bvh) in metres at 30 fps."""
+def load_motion(path: str | Path) -> Scene:
+    """Every person in ``path`` (.npz or .bvh) as a scene in metres at 30 fps;
+    ``meta["source_fps"]`` is the file's frame rate, ``meta["source"]`` its path."""
     from umf.data.bandai import resample
 
     path = Path(path)
@@ -110,4 +99,4 @@ def load_motion(path: str | Path) -> Motion:
     if not 1.0 <= fps <= 1000.0:
         raise UMFError(f"{path}: implausible frame rate {fps:g} fps")
     joints = resample(np.ascontiguousarray(joints, dtype=np.float32), fps, FPS)
-    return Motion(joints=joints, text=text, source_fps=fps)
+    return Scene(joints, None, text, FPS, meta={"source_fps": fps, "source": str(path)})

@@ -371,7 +371,7 @@ def load_evaluator(
 
     The text source is rebuilt from the stored config unless given; eval mode.
     """
-    from umf.train.checkpoint import find_checkpoint, load_checkpoint
+    from umf.checkpoint import find_checkpoint, load_checkpoint
 
     path = Path(path)
     if not (path / "format.json").exists():

@@ -201,8 +201,7 @@ def cut(scene: Scene, frames: int) -> Scene:
     """The scene's first ``frames`` frames (a copy, so the batch's arrays can be freed)."""
     if frames >= scene.num_frames:
         return scene
-    return dataclasses.replace(scene, joints=scene.joints[:, :frames].copy(),
-                               features=scene.features[:, :frames].copy())  # fmt: skip
+    return scene.frames(frames)
 
 
 def length_batches(frames: Sequence[int], batch: int) -> list[list[int]]:
@@ -232,7 +231,9 @@ def _features(scene: Scene) -> np.ndarray:
 
 
 def _joints(scene: Scene) -> np.ndarray:
-    return scene.joints
+    """What the physics and accumulation sections score: the decoded positions
+    (``raw_joints``), not the exports' fitted bodies (scenes are generated ``fit=False``)."""
+    return scene.raw_joints
 
 
 @dataclass
@@ -283,7 +284,7 @@ class Contender:
             t0 = time.perf_counter()
             scenes = self.pipe([captions[j] for j in idx], num_people=people,
                                seconds=sizes[idx[0]] / self.pipe.config.fps,
-                               seed=batch_seed(seed, i), separate=False,
+                               seed=batch_seed(seed, i), separate=False, fit=False,
                                **self.settings)  # fmt: skip
             spent = self.timing.setdefault(people, [0.0, 0])
             spent[0] += time.perf_counter() - t0
@@ -888,7 +889,15 @@ def render_markdown(results: dict[str, Any]) -> str:
     ]
     if results.get("relations"):
         out += [relations_markdown(results["relations"]), "", "![relations](relations.png)"]
-    out += ["", "## 3. Physics", ""]
+    out += [
+        "",
+        "## 3. Physics",
+        "",
+        "Scored on the decoded joints (`Scene.raw_joints`): the raw model output, before "
+        "the kinematic fit and foot clean-up that every exported file carries "
+        "(`umf.kinematics`). Relations and error accumulation score them too.",
+        "",
+    ]
     if results.get("physics"):
         out.append(physics_markdown(results["physics"]))
     out += ["", "## 4. Error accumulation over the person index", ""]

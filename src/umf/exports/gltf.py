@@ -13,9 +13,10 @@ Layout (``person1`` stands for each person's name; default ``person1``, ``person
 - one animation, ``umf``, holding everybody's channels so all people play in sync: the
   pelvis translation and every joint's rotation at every frame, LINEAR samplers.
 
-Rotations come from inverse kinematics against each person's own fitted bone lengths, as in
-``Scene.save_bvh``, so forward kinematics of the node hierarchy reproduces the joints.
-Units are metres and Y is up: glTF's own convention, nothing is converted.
+Offsets, rotations and the pelvis path are the scene's rigid bodies
+(:class:`umf.kinematics.Bodies`), the same as in the BVH files, so forward kinematics of the
+node hierarchy is ``scene.joints``. Units are metres and Y is up: glTF's own convention,
+nothing is converted.
 """
 
 from __future__ import annotations
@@ -33,16 +34,10 @@ import torch
 from umf import __version__
 from umf.errors import UMFError
 from umf.io import atomic_path
+from umf.kinematics import Bodies, fit_bodies
 from umf.render import PALETTE
 from umf.rotations import matrix_to_quat
-from umf.skeleton import (
-    JOINT_NAMES,
-    NUM_JOINTS,
-    PARENTS,
-    REST_DIRECTIONS,
-    fit_offsets,
-    inverse_kinematics,
-)
+from umf.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, REST_DIRECTIONS
 
 __all__ = [
     "ANIMATION_NAME",
@@ -54,6 +49,7 @@ __all__ = [
     "person_motion",
     "rest_positions",
     "scene_to_gltf",
+    "write",
     "write_glb",
 ]
 
@@ -94,15 +90,12 @@ def continuous_quaternions(q: np.ndarray) -> np.ndarray:
     return q * sign[..., None]
 
 
-def person_motion(joints: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """One person's joints (T, 22, 3) -> bone offsets (22, 3), local rotations (T, 22, 4)
-    as glTF quaternions (x, y, z, w) and the pelvis path (T, 3); float64. Same IK as the
-    BVH export, so both formats agree."""
-    person = torch.from_numpy(np.asarray(joints, dtype=np.float64))
-    offsets = fit_offsets(person)
-    wxyz = matrix_to_quat(inverse_kinematics(person, offsets)).numpy()
+def person_motion(bodies: Bodies, i: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Person ``i`` of ``bodies`` -> bone offsets (22, 3), local rotations (T, 22, 4) as
+    glTF quaternions (x, y, z, w), sign-continuous, and the pelvis path (T, 3); float64."""
+    wxyz = matrix_to_quat(torch.from_numpy(bodies.rotations[i])).numpy()
     xyzw = np.concatenate([wxyz[..., 1:], wxyz[..., :1]], axis=-1)
-    return offsets.numpy(), continuous_quaternions(xyzw), person[:, 0].numpy()
+    return bodies.offsets[i], continuous_quaternions(xyzw), bodies.root[i]
 
 
 def rest_positions(offsets: np.ndarray, root: np.ndarray) -> np.ndarray:
@@ -251,14 +244,22 @@ class _Packer:
 
 
 # ----------------------------------------------------------------- the document
-def _check_inputs(joints: np.ndarray, fps: float, names: Sequence[str] | None) -> list[str]:
+def _as_bodies(motion: Bodies | np.ndarray) -> Bodies:
+    """Bodies as given, or fitted (plainly, no clean-up) to joints (N, T, 22, 3)."""
+    if isinstance(motion, Bodies):
+        return motion
+    joints = np.asarray(motion, dtype=np.float64)
     if joints.ndim != 4 or joints.shape[2:] != (NUM_JOINTS, 3) or 0 in joints.shape[:2]:
         raise UMFError(f"glTF export needs joints (N, T, 22, 3), got {joints.shape}")
     if not np.isfinite(joints).all():
         raise UMFError("glTF export: the joints contain NaN or infinite values")
+    return fit_bodies(joints, clean=False)
+
+
+def _check_inputs(bodies: Bodies, fps: float, names: Sequence[str] | None) -> list[str]:
     if not (np.isfinite(fps) and fps > 0):
         raise UMFError(f"glTF export: fps must be positive, got {fps}")
-    n = joints.shape[0]
+    n = bodies.num_people
     names = [f"person{i + 1}" for i in range(n)] if names is None else [str(s) for s in names]
     if len(names) != n or len(set(names)) != n or not all(names):
         raise UMFError(f"glTF export needs {n} distinct, non-empty person names, got {names}")
@@ -272,11 +273,11 @@ def _float32_unit(q: np.ndarray) -> np.ndarray:
 
 
 def _add_person(
-    gltf: gl.GLTF2, packer: _Packer, index: int, name: str, joints: np.ndarray
+    gltf: gl.GLTF2, packer: _Packer, index: int, name: str, bodies: Bodies
 ) -> tuple[list[int], list[tuple[int, str, int]]]:
-    """Nodes, material, mesh and skin of one person; returns their scene roots and the
-    animated (node, path, output accessor) triples."""
-    offsets, quats, root = person_motion(joints)
+    """Nodes, material, mesh and skin of person ``index``; returns their scene roots and
+    the animated (node, path, output accessor) triples."""
+    offsets, quats, root = person_motion(bodies, index)
     rest = rest_positions(offsets, root[0])
     first = len(gltf.nodes)  # the person root; joint j is node first + 1 + j
     children: list[list[int]] = [[] for _ in range(NUM_JOINTS)]
@@ -333,19 +334,20 @@ def _add_person(
 
 
 def scene_to_gltf(
-    joints: np.ndarray,
+    motion: Bodies | np.ndarray,
     fps: float,
     names: Sequence[str] | None = None,
     text: str = "",
     extras: dict[str, Any] | None = None,
 ) -> gl.GLTF2:
-    """A glTF document (binary buffer attached) of N people's joints (N, T, 22, 3).
+    """A glTF document (binary buffer attached) of N people: rigid ``Bodies``, or joints
+    (N, T, 22, 3), which are fitted first (bone lengths and inverse kinematics).
 
     ``names`` name the people (default ``person1``...); ``text`` (the prompt), fps, the
     names and ``extras`` (e.g. seed, model) are stored in ``asset.extras``.
     """
-    joints = np.asarray(joints, dtype=np.float64)
-    names = _check_inputs(joints, float(fps), names)
+    bodies = _as_bodies(motion)
+    names = _check_inputs(bodies, float(fps), names)
     gltf = gl.GLTF2(
         asset=gl.Asset(
             version="2.0",
@@ -354,11 +356,11 @@ def scene_to_gltf(
         )
     )
     packer = _Packer(gltf)
-    times = (np.arange(joints.shape[1]) / float(fps)).astype(np.float32)
+    times = (np.arange(bodies.num_frames) / float(fps)).astype(np.float32)
     time_accessor = packer.add(times, bounds=True)  # samplers' input needs min/max
     roots, channels = [], []
-    for i, (name, person) in enumerate(zip(names, joints, strict=True)):
-        person_roots, person_channels = _add_person(gltf, packer, i, name, person)
+    for i, name in enumerate(names):
+        person_roots, person_channels = _add_person(gltf, packer, i, name, bodies)
         roots += person_roots
         channels += person_channels
     gltf.animations.append(
@@ -387,15 +389,23 @@ def glb_bytes(gltf: gl.GLTF2) -> bytes:
 
 def write_glb(
     path: str | os.PathLike,
-    joints: np.ndarray,
+    motion: Bodies | np.ndarray,
     fps: float,
     names: Sequence[str] | None = None,
     text: str = "",
     extras: dict[str, Any] | None = None,
 ) -> Path:
-    """Write a scene as a GLB atomically: a failure leaves no (or the old) file at ``path``."""
-    gltf = scene_to_gltf(joints, fps, names=names, text=text, extras=extras)
+    """Write bodies (or joints, fitted first) as a GLB atomically: a failure leaves no (or
+    the old) file at ``path``."""
+    gltf = scene_to_gltf(motion, fps, names=names, text=text, extras=extras)
     with atomic_path(path) as tmp, open(tmp, "wb") as fh:
         for chunk in gltf.save_to_bytes():
             fh.write(chunk)
     return Path(path)
+
+
+def write(scene: Any, path: Path) -> list[Path]:
+    """The scene's GLB (its bodies; prompt, fps, seed and model in ``asset.extras``)."""
+    scene = scene.rigid()
+    extras = {"seed": scene.seed, "model": scene.model}
+    return [write_glb(path, scene.bodies, scene.fps, text=scene.text, extras=extras)]

@@ -295,13 +295,11 @@ def add_motion_file(store: SceneStore, path: Path) -> SceneRecord:
     the NPZ download is the file itself (a .bvh gets an NPZ of its joints)."""
     from umf.data.motion_file import FPS, load_motion
     from umf.io import save_npz_atomic
-    from umf.pipeline import Scene
 
-    motion = load_motion(path)
-    joints = motion.joints
-    text = motion.text or path.stem
-    scene = Scene(joints, np.zeros((*joints.shape[:2], 262), np.float32), text, FPS)
-    record = store.new_record(text, joints, FPS, motion.num_people, motion.num_frames,
+    scene = load_motion(path)
+    joints = scene.joints
+    text = scene.text = scene.text or path.stem
+    record = store.new_record(text, joints, FPS, scene.num_people, scene.num_frames,
                               {"source": path.name})  # fmt: skip
     stem = slug(text)
     record.files["glb"] = scene.save_glb(record.folder / f"{stem}.glb").name

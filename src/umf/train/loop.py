@@ -29,11 +29,7 @@ from torch import Tensor, nn
 from torch.utils.data import DataLoader, IterableDataset, RandomSampler
 from tqdm import tqdm
 
-from umf.config import TrainConfig
-from umf.errors import UMFError
-from umf.io import atomic_path
-from umf.representation import Normalizer
-from umf.train.checkpoint import (
+from umf.checkpoint import (
     Checkpoint,
     find_checkpoint,
     load_checkpoint,
@@ -41,6 +37,10 @@ from umf.train.checkpoint import (
     previous_path,
     save_checkpoint,
 )
+from umf.config import TrainConfig
+from umf.errors import UMFError
+from umf.io import atomic_path
+from umf.representation import Normalizer
 from umf.train.datasets import MixedBatches, ShardedSampler
 
 LAST, BEST = "last", "best"

@@ -15,10 +15,7 @@ from typing import Any
 
 import torch
 
-from umf.config import TrainConfig, UMFConfig, family_config, set_option
-from umf.data.corpus import Corpus
-from umf.errors import UMFError
-from umf.train.checkpoint import (
+from umf.checkpoint import (
     find_checkpoint,
     load_checkpoint,
     load_first_good,
@@ -26,6 +23,9 @@ from umf.train.checkpoint import (
     read_weights,
     save_checkpoint,
 )
+from umf.config import TrainConfig, UMFConfig, family_config, set_option
+from umf.data.corpus import Corpus
+from umf.errors import UMFError
 from umf.train.datasets import MixedBatches, SceneDataset, SingleMotionDataset, make_loader
 
 STAGES = ("vae", "pflow", "sflow")

@@ -1,0 +1,87 @@
+"""Measure what the kinematic fit (umf.kinematics) does to generated scenes.
+
+For each prompt (the README's examples, seed 0, bundled model): bone-length spread within
+a person (max - min of each bone over time, the worst bone), foot skating (mean horizontal
+speed of a foot joint while its decoded contact label says planted), floor penetration
+(per frame the depth of the lowest joint below the floor; mean and max), the distance of
+the fitted joints to the decoded ones, the SMPL mapping residual and the fit's time.
+
+    python scripts/fit_report.py [--model DIR]
+"""
+
+from __future__ import annotations
+
+import argparse
+import time
+
+import numpy as np
+import torch
+
+from umf import UMFPipeline
+from umf.exports.smpl import mapping_residual
+from umf.kinematics import FOOT_JOINTS, fit_bodies
+from umf.representation import CONTACT
+from umf.skeleton import bone_lengths
+
+PROMPTS = [
+    ("A person walks forward.", 1), ("Someone waves with the right hand.", 1),
+    ("A person raises both hands.", 1), ("Someone bows politely.", 1),
+    ("A person runs forward.", 1), ("One person bows and the other bows back.", 2),
+    ("Two people walk side by side.", 2), ("Three people walk side by side.", 3),
+    ("A person calls and four people walk over to them.", 5),
+]  # fmt: skip
+
+
+def spread_cm(joints: np.ndarray) -> np.ndarray:
+    """Per person, the largest max - min of a bone's length over time (cm)."""
+    lengths = bone_lengths(torch.from_numpy(joints.astype(np.float64)))
+    return ((lengths.max(1).values - lengths.min(1).values).max(-1).values * 100).numpy()
+
+
+def skating(joints: np.ndarray, contacts: np.ndarray, fps: float) -> float:
+    """Mean horizontal speed (m/s) of foot joints over the steps labelled planted."""
+    feet = joints[:, :, list(FOOT_JOINTS)][..., [0, 2]]
+    speed = np.linalg.norm(np.diff(feet, axis=1), axis=-1) * fps
+    planted = contacts[:, :-1] > 0.5
+    return float(speed[planted].mean()) if planted.any() else 0.0
+
+
+def depth_cm(joints: np.ndarray, floor: float) -> tuple[float, float]:
+    depth = np.clip(floor - joints[..., 1].min(-1), 0.0, None) * 100
+    return float(depth.mean()), float(depth.max())
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser()
+    ap.add_argument("--model", default=None)
+    args = ap.parse_args()
+    torch.set_num_threads(1)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    rows = []
+    for prompt, n in PROMPTS:
+        s = pipe(prompt, num_people=n, seconds=4.0, seed=0, fit=False)[0]
+        raw, contacts, floor = s.joints, s.features[..., CONTACT], 0.0
+        t0 = time.perf_counter()
+        bodies = fit_bodies(raw, contacts, floor, True)
+        seconds = time.perf_counter() - t0
+        fit = bodies.joints()
+        gap = np.linalg.norm(fit - raw, axis=-1)
+        res = np.concatenate([mapping_residual(bodies, i).ravel() for i in range(n)])
+        rows.append((prompt, n, spread_cm(raw).max(), spread_cm(fit).max(),
+                     skating(raw, contacts, s.fps), skating(fit, contacts, s.fps),
+                     *depth_cm(raw, floor), *depth_cm(fit, floor), gap.mean() * 1000,
+                     gap.max() * 1000, res.mean() * 1000, res.max() * 1000, seconds))  # fmt: skip
+    head = ("prompt | N | bone spread cm raw / fit | skate m/s raw / fit | floor depth cm "
+            "mean/max raw | fit | |fit - raw| mm mean / max | SMPL residual mm mean / max | fit s")
+    print(head)
+    for r in rows:
+        print(f"{r[0][:40]} | {r[1]} | {r[2]:.1f} / {r[3]:.4f} | {r[4]:.3f} / {r[5]:.3f} | "
+              f"{r[6]:.2f}/{r[7]:.2f} | {r[8]:.2f}/{r[9]:.2f} | {r[10]:.1f} / {r[11]:.1f} | "
+              f"{r[12]:.1f} / {r[13]:.1f} | {r[14]:.2f}")  # fmt: skip
+    a = np.array([r[2:] for r in rows], dtype=float)
+    print("mean | | {:.1f} / {:.4f} | {:.3f} / {:.3f} | {:.2f}/{:.2f} | {:.2f}/{:.2f} | "
+          "{:.1f} / {:.1f} | {:.1f} / {:.1f} | {:.2f}".format(*a.mean(0)))
+
+
+if __name__ == "__main__":
+    main()
