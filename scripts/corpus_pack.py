@@ -98,7 +98,7 @@ def _pack_text(corpus: Path, out: Path) -> None:
     lookup = TextFeatureCache(CachedTextEncoder.load(cache), cache)
     rel, meta, tokens, pooled, lengths = [], [], [], [], []
     for text in corpus_captions(Corpus.load(corpus)):
-        path = lookup._file(text)
+        path = lookup.path_of(text)
         if not path.exists():
             raise SystemExit(f"{cache}: no features for {text!r}; run the flow stage once")
         with safe_open(str(path), framework="numpy") as fh:

@@ -71,16 +71,20 @@ def main() -> None:
                      skating(raw, contacts, s.fps), skating(fit, contacts, s.fps),
                      *depth_cm(raw, floor), *depth_cm(fit, floor), gap.mean() * 1000,
                      gap.max() * 1000, res.mean() * 1000, res.max() * 1000, seconds))  # fmt: skip
-    head = ("prompt | N | bone spread cm raw / fit | skate m/s raw / fit | floor depth cm "
-            "mean/max raw | fit | |fit - raw| mm mean / max | SMPL residual mm mean / max | fit s")
+    head = (
+        "prompt | N | bone spread cm raw / fit | skate m/s raw / fit | floor depth cm "
+        "mean/max raw | fit | |fit - raw| mm mean / max | SMPL residual mm mean / max | fit s"
+    )
     print(head)
     for r in rows:
         print(f"{r[0][:40]} | {r[1]} | {r[2]:.1f} / {r[3]:.4f} | {r[4]:.3f} / {r[5]:.3f} | "
               f"{r[6]:.2f}/{r[7]:.2f} | {r[8]:.2f}/{r[9]:.2f} | {r[10]:.1f} / {r[11]:.1f} | "
               f"{r[12]:.1f} / {r[13]:.1f} | {r[14]:.2f}")  # fmt: skip
     a = np.array([r[2:] for r in rows], dtype=float)
-    print("mean | | {:.1f} / {:.4f} | {:.3f} / {:.3f} | {:.2f}/{:.2f} | {:.2f}/{:.2f} | "
-          "{:.1f} / {:.1f} | {:.1f} / {:.1f} | {:.2f}".format(*a.mean(0)))
+    print(
+        "mean | | {:.1f} / {:.4f} | {:.3f} / {:.3f} | {:.2f}/{:.2f} | {:.2f}/{:.2f} | "
+        "{:.1f} / {:.1f} | {:.1f} / {:.1f} | {:.2f}".format(*a.mean(0))
+    )
 
 
 if __name__ == "__main__":

@@ -102,7 +102,7 @@ def _write_timing(info):
 
 
 def save_back(run, tag):
-    """What comes home: the exported model in two tars (16 MiB each at most), metrics."""
+    """Metrics and config of ``run`` so far, as one tar under $OUT (the model comes at the end)."""
     with tarfile.open(OUT / f"metrics-{tag}.tar", "w") as tf:
         for p in run.glob("*/metrics.csv"):
             tf.add(p, arcname=f"{p.parent.name}/metrics.csv")

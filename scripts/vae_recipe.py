@@ -26,12 +26,12 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from umf.checkpoint import load_checkpoint
 from umf.config import UMFConfig
 from umf.data.corpus import Corpus
 from umf.eval.protocol import ProtocolConfig, corpus_items, embed_motions, embed_texts, set_metrics
 from umf.eval.reconstruction import reconstruct, reconstruction_metrics
 from umf.models.vae import MotionVAE
-from umf.checkpoint import load_checkpoint
 from umf.train.run import best_or_last
 
 

@@ -360,5 +360,5 @@ def test_cache_only_encoder_reads_a_cache_built_elsewhere(clip, tmp_path):
     with pytest.raises(UMFError, match="not in the text cache"):
         TextFeatureCache(offline_enc, tmp_path).encode(["a prompt nobody encoded"])
     (tmp_path / "encoder.json").write_text("{broken")
-    with pytest.raises(UMFError, match="encoder.json"):
+    with pytest.raises(UMFError, match=r"encoder\.json"):
         CachedTextEncoder.load(tmp_path)

@@ -21,7 +21,7 @@ import torch
 from torch import Tensor, nn
 
 from umf.errors import UMFError
-from umf.io import save_tensors_atomic
+from umf.io import save_tensors_atomic, write_text_atomic
 
 Pooling = Literal["mean", "eot"]
 
@@ -320,9 +320,7 @@ class CachedTextEncoder:
         data = {"name": encoder.name, "identity": encoder.identity, "dim": encoder.dim}
         path = Path(cache_dir) / CachedTextEncoder.MANIFEST
         path.parent.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_suffix(".tmp")
-        tmp.write_text(json.dumps(data, indent=1))
-        os.replace(tmp, path)
+        write_text_atomic(path, json.dumps(data, indent=1))
 
     def encode(self, texts: list[str]) -> TextFeatures:
         first = texts[0] if texts else ""
@@ -353,7 +351,8 @@ class TextFeatureCache:
     def __len__(self) -> int:
         return len(self._memory)
 
-    def _file(self, text: str) -> Path:
+    def path_of(self, text: str) -> Path:
+        """The disk file that holds (or would hold) ``text``'s features."""
         assert self.cache_dir is not None
         key = hashlib.sha256(f"{self.encoder.identity}\0{text}".encode()).hexdigest()
         return self.cache_dir / key[:2] / f"{key}.safetensors"
@@ -361,7 +360,7 @@ class TextFeatureCache:
     def _read(self, text: str) -> tuple[Tensor, Tensor] | None:
         from safetensors import SafetensorError, safe_open
 
-        path = self._file(text)
+        path = self.path_of(text)
         if not path.is_file():
             return None
         try:
@@ -394,7 +393,7 @@ class TextFeatureCache:
             self._memory[text] = (tokens, pooled)
             if self.cache_dir is not None:
                 meta = {"text": text, "identity": self.encoder.identity}
-                save_tensors_atomic({"tokens": tokens, "pooled": pooled}, self._file(text), meta)
+                save_tensors_atomic({"tokens": tokens, "pooled": pooled}, self.path_of(text), meta)
 
     def encode(self, texts: list[str]) -> TextFeatures:
         """Same layout and values as ``encoder.encode(texts)``, computing only unseen prompts.
