@@ -1,0 +1,107 @@
+"""Retrain both flows of a model on one GPU, side by side, within a fixed time budget.
+
+P-Flow and S-Flow only depend on the frozen VAE, so on a lent GPU with a hard time limit
+they can train at the same time in two processes (the small family's flows are far from
+filling a GPU: a step is launch-bound, not compute-bound). The VAE is taken from an
+existing model directory (the bundled one by default) and is not retrained.
+
+    python scripts/corpus_pack.py unpack .gpu out/corpus          # on the GPU node
+    python scripts/gpu_flows_train.py 540 --set train_pflow.max_steps=3500 ...
+
+The first argument is the wall-clock budget in seconds: a stage still running then is
+stopped and the model is exported from the best checkpoints written so far (atomic, every
+``ckpt_every`` steps). Environment: ``OUT`` (exported model, metrics and logs), ``RUNS``
+(run directory parent), ``CORPUS``, ``MODEL`` (where the frozen VAE comes from),
+``PFLOW_WORKERS`` / ``SFLOW_WORKERS`` (loader processes while the latent banks are built).
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+OUT = Path(os.environ.get("OUT", "/tmp/out"))
+CORPUS = Path(os.environ.get("CORPUS", "out/corpus"))
+RUNS = Path(os.environ.get("RUNS", "/root/runs"))
+MODEL = Path(os.environ.get("MODEL", "src/umf/assets/model"))
+
+
+def child(stage: str, run: Path, plan: Path) -> None:
+    """One stage, trained to its configured ``max_steps`` (or until the parent stops it)."""
+    import torch
+
+    from umf.config import UMFConfig
+    from umf.train.run import Launch, train_stage
+
+    torch.backends.cuda.matmul.allow_tf32 = True
+    torch.backends.cudnn.allow_tf32 = True
+    cfg = UMFConfig.load_yaml(plan)
+    launch = Launch(accelerator="gpu" if torch.cuda.is_available() else "cpu", progress=False)
+    t0 = time.time()
+    res = train_stage(stage, CORPUS, run, cfg, launch, resume=True)
+    print(f"== {stage}: {time.time() - t0:.1f} s in all; {res}", flush=True)
+
+
+def parent(budget: float, overrides: list[str]) -> None:
+    from umf.config import UMFConfig, set_option
+    from umf.train.run import check_run_config, export_model
+
+    t0 = time.time()
+    run = RUNS / "flows"
+    (run / "vae").mkdir(parents=True, exist_ok=True)
+    if not (run / "vae" / "best").exists():
+        shutil.copytree(MODEL, run / "vae" / "best")
+    cfg = UMFConfig.load_yaml(MODEL / "config.json")
+    for o in overrides:
+        cfg = set_option(cfg, o)
+    check_run_config(cfg)
+    cfg.save_yaml(run / "plan.yaml")
+    OUT.mkdir(parents=True, exist_ok=True)
+    procs = {}
+    for stage, workers in (("pflow", "PFLOW_WORKERS"), ("sflow", "SFLOW_WORKERS")):
+        w = os.environ.get(workers, "8")
+        stage_cfg = set_option(cfg, f"train_{stage}.num_workers={w}")
+        stage_run = run / f"{stage}-cfg"
+        stage_run.mkdir(exist_ok=True)
+        stage_cfg.save_yaml(stage_run / "plan.yaml")
+        log = open(OUT / f"{stage}.log", "w")  # open as long as the child runs
+        procs[stage] = subprocess.Popen(
+            [sys.executable, __file__, "child", stage, str(run), str(stage_run / "plan.yaml")],
+            stdout=log, stderr=subprocess.STDOUT,
+        )  # fmt: skip
+    while any(p.poll() is None for p in procs.values()):
+        if time.time() - t0 > budget:
+            for stage, p in procs.items():
+                if p.poll() is None:
+                    print(f"budget reached: stopping {stage}", flush=True)
+                    p.terminate()
+            for p in procs.values():
+                p.wait(timeout=60)
+            break
+        time.sleep(2)
+    print({s: p.returncode for s, p in procs.items()}, f"{time.time() - t0:.0f} s", flush=True)
+    for stage in ("pflow", "sflow"):  # each stage's best weights, whatever happened to the other
+        best = run / stage / "best" / f"{stage}.safetensors"
+        if best.exists():
+            shutil.copy(best, OUT / f"best-{stage}.safetensors")
+    model = export_model(run, RUNS / "model")
+    for f in sorted(model.iterdir()):
+        shutil.copy(f, OUT / f.name)
+    for stage in ("pflow", "sflow"):
+        if (run / stage / "metrics.csv").exists():
+            shutil.copy(run / stage / "metrics.csv", OUT / f"{stage}-metrics.csv")
+    shutil.copy(run / "plan.yaml", OUT / "plan.yaml")
+    print(f"DONE {time.time() - t0:.0f} s", flush=True)
+
+
+if __name__ == "__main__":
+    if sys.argv[1] == "child":
+        child(sys.argv[2], Path(sys.argv[3]), Path(sys.argv[4]))
+    else:
+        args = sys.argv[2:]
+        sets = [args[i + 1] for i in range(len(args) - 1) if args[i] == "--set"]
+        parent(float(sys.argv[1]), sets)
