@@ -24,6 +24,8 @@ from umf.representation import facing_direction
 
 Array = np.ndarray
 
+FEW_REAL = 5  # fewer real clips than this: the range is one or two motions, not a spread
+
 HEAD, PELVIS, L_WRIST, R_WRIST, L_ANKLE, R_ANKLE = 15, 0, 20, 21, 7, 8
 
 # label (Bandai content) -> the prompt a user would type; the statistics each label must
@@ -82,6 +84,7 @@ class LabelCheck:
     real_q: tuple[float, float, float]  # 25th, 50th, 75th percentile of the real clips
     generated_median: float
     passed: bool
+    real_count: int = 0  # real clips behind the range (0: not recorded, older reports)
 
 
 def compare_label(
@@ -101,7 +104,7 @@ def compare_label(
         g = float(np.median([x[s] for x in gs]))
         pad = slack * (q[2] - q[0])
         out.append(LabelCheck(label, prompt, s, (float(q[0]), float(q[1]), float(q[2])), g,
-                              bool(q[0] - pad <= g <= q[2] + pad)))  # fmt: skip
+                              bool(q[0] - pad <= g <= q[2] + pad), len(rs)))  # fmt: skip
     return out
 
 
@@ -130,13 +133,22 @@ def label_passes(rows: Sequence[LabelCheck]) -> dict[str, bool]:
 
 def format_checks(rows: Sequence[LabelCheck]) -> str:
     """Markdown table of the checks."""
-    lines = ["| label | prompt | statistic | real 25/50/75 % | generated median | ok |",
-             "|---|---|---|---|---:|:-:|"]  # fmt: skip
+    head = "| label | prompt | statistic | real clips | real 25/50/75 % | generated median | ok |"
+    lines = [head, "|---|---|---|---:|---|---:|:-:|"]
     for r in rows:
         q = " / ".join(f"{v:.2f}" for v in r.real_q)
-        lines.append(f"| {r.label} | {r.prompt} | {r.stat} | {q} | {r.generated_median:.2f} | "
-                     f"{'yes' if r.passed else 'no'} |")  # fmt: skip
+        n = str(r.real_count) if r.real_count else "?"
+        lines.append(f"| {r.label} | {r.prompt} | {r.stat} | {n} | {q} | "
+                     f"{r.generated_median:.2f} | {'yes' if r.passed else 'no'} |")  # fmt: skip
     return "\n".join(lines)
+
+
+def few_real_clips(rows: Sequence[LabelCheck], least: int = FEW_REAL) -> dict[str, int]:
+    """Labels whose real range rests on fewer than ``least`` clips (label -> count).
+
+    With one clip the "interquartile range" has zero width and nothing but that clip's
+    exact value passes; the report names such labels instead of hiding them."""
+    return {r.label: r.real_count for r in rows if 0 < r.real_count < least}
 
 
 def real_joints_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),

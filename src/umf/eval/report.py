@@ -829,14 +829,22 @@ def reconstruction_section(corpus: Corpus, contenders: Sequence[Contender]) -> d
 
 
 def motion_markdown(motion: dict[str, Any]) -> str:
-    from umf.eval.motion_stats import LabelCheck, format_checks
+    from umf.eval.motion_stats import FEW_REAL, LabelCheck, few_real_clips, format_checks
 
     parts = []
     for name, sec in motion.items():
         rows = [LabelCheck(**{**r, "real_q": tuple(r["real_q"])}) for r in sec["checks"]]
+        few = few_real_clips(rows)
+        note = ""
+        if few:
+            named = ", ".join(f"{k} ({v})" for k, v in few.items())
+            ok = sum(v for k, v in sec["labels"].items() if k not in few)
+            note = (f" Labels with fewer than {FEW_REAL} real clips in the corpus: {named}; "
+                    "their range is those clips' own values (one clip: zero width). Without "
+                    f"them: {ok} of {sec['total'] - len(few)}.")  # fmt: skip
         parts += [f"**{name}**: {sec['passed']} of {sec['total']} labels within the real "
                   "clips' interquartile range (widened by a quarter of it) on every "
-                  "statistic.", "", format_checks(rows), ""]  # fmt: skip
+                  f"statistic.{note}", "", format_checks(rows), ""]  # fmt: skip
     return "\n".join(parts)
 
 

@@ -1,0 +1,91 @@
+"""Per-label body statistics (umf.eval.motion_stats) on motions built by hand."""
+
+from __future__ import annotations
+
+import numpy as np
+import torch
+
+from umf.eval import motion_stats as MS
+from umf.skeleton import NUM_JOINTS, PARENTS, default_offsets
+
+FPS = 30.0
+
+
+def rest_pose() -> np.ndarray:
+    """Standing rest pose (22, 3), facing +Z, feet on the floor."""
+    off = default_offsets().numpy().astype(np.float64)
+    pos = np.zeros((NUM_JOINTS, 3))
+    for j in range(1, NUM_JOINTS):
+        pos[j] = pos[PARENTS[j]] + off[j]
+    pos[:, 1] -= pos[:, 1].min()
+    return pos
+
+
+def still(frames: int = 120) -> np.ndarray:
+    return np.repeat(rest_pose()[None], frames, axis=0)
+
+
+def test_rest_pose_faces_plus_z():
+    from umf.representation import facing_direction
+
+    f = facing_direction(torch.from_numpy(rest_pose()[None]))[0].numpy()
+    np.testing.assert_allclose(f, [0, 0, 1], atol=1e-6)
+
+
+def test_pelvis_speed_and_direction():
+    t = np.arange(120) / FPS
+    fwd, back = still(), still()
+    fwd[..., 2] += 1.2 * t[:, None]  # 1.2 m/s along the facing direction
+    back[..., 2] -= 0.8 * t[:, None]
+    s_fwd, s_back = MS.motion_statistics(fwd), MS.motion_statistics(back)
+    assert abs(s_fwd["pelvis_speed"] - 1.2) < 1e-6
+    assert abs(s_fwd["backward_speed"] + 1.2) < 1e-6  # forward travel is negative backward
+    assert abs(s_back["backward_speed"] - 0.8) < 1e-6
+    # travel alone is not gesture: root-relative energies stay zero
+    assert s_fwd["wrist_energy"] < 1e-9 and s_fwd["ankle_energy"] < 1e-9
+
+
+def test_head_drop_and_wrists():
+    bow = still()
+    drop = np.zeros(120)
+    drop[20:] = 0.2 * np.sin(np.linspace(0, np.pi, 100))  # stands, down 20 cm and back up
+    bow[:, MS.HEAD, 1] -= drop
+    assert abs(MS.motion_statistics(bow)["head_drop"] - 0.2) < 1e-3
+    wave = still()
+    head_y = wave[0, MS.HEAD, 1]
+    wave[:, MS.R_WRIST, 1] = head_y + 0.3  # held 30 cm above the head
+    wave[:, MS.R_WRIST, 0] += 0.1 * np.sin(2 * np.pi * 2.5 * np.arange(120) / FPS)  # 2.5 Hz
+    s = MS.motion_statistics(wave)
+    assert abs(s["right_wrist_above_head"] - 0.3) < 1e-9
+    # mean |d/dt 0.1 sin(5 pi t)| = 0.1 * 5 pi * 2 / pi = 1.0 m/s
+    assert abs(s["right_wrist_energy"] - 1.0) < 0.02
+    assert s["both_wrists_above_head"] < 0  # the left hand stays down
+
+
+def test_a_still_pose_fails_a_wave_and_a_wave_passes():
+    rng = np.random.default_rng(0)
+    real = []
+    for _ in range(12):
+        w = still()
+        amp = rng.uniform(0.08, 0.12)
+        w[:, MS.R_WRIST, 1] = w[0, MS.HEAD, 1] + rng.uniform(0.25, 0.35)
+        w[:, MS.R_WRIST, 0] += amp * np.sin(2 * np.pi * 2.5 * np.arange(120) / FPS)
+        real.append(w)
+    rows = MS.compare_label("wave-right-hand", real, [still()] * 4)
+    assert not all(r.passed for r in rows)
+    assert {r.real_count for r in rows} == {12}
+    rows = MS.compare_label("wave-right-hand", real, real[:6])
+    assert all(r.passed for r in rows)
+    assert MS.few_real_clips(rows) == {}
+
+
+def test_labels_with_few_real_clips_are_named_and_shown():
+    rows = MS.compare_label("kick", [still()], [still()])
+    assert MS.few_real_clips(rows) == {"kick": 1}
+    q = rows[0].real_q
+    assert q[0] == q[1] == q[2]  # one clip: a zero-width range
+    table = MS.format_checks(rows)
+    assert "| real clips |" in table.splitlines()[0]
+    assert "| kick | A person kicks. | ankle_energy | 1 |" in table
+    passes = MS.label_passes(rows)
+    assert passes == {"kick": True}  # its own exact values pass
