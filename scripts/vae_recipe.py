@@ -5,7 +5,14 @@
 
 ``memorise`` trains a fresh small VAE (``--set`` overrides) on one fixed batch of 32
 randomly placed training crops (one thread) and prints R^2 per body-frame group every 50
-steps: how fast a recipe can learn the pose at all.
+steps: how fast a recipe can learn the pose at all. ``--label wave-right-hand`` takes the
+crops from clips of one label only; every line also gives how much of the real wrists'
+and ankles' root-relative motion energy the reconstruction keeps (1 = all of it; a
+latent too coarse in time to hold a 2-3 Hz wave keeps little, however long it trains).
+
+``labels MODEL`` encodes and decodes up to 24 real clips of every label of
+``umf.eval.motion_stats`` and prints each label's statistics, real vs reconstructed
+(medians): what the VAE keeps of a wave, a bow, a walk before any flow is involved.
 
 ``score`` takes model directories (``src/umf/assets/model``) or VAE stage directories of a
 run (``RUN/vae``), reconstructs every single-person test clip (posterior mean), and writes
@@ -127,7 +134,11 @@ def memorise(args: argparse.Namespace) -> None:
     corpus = Corpus.load(args.corpus)
     ds = SingleMotionDataset(corpus, "train", corpus.normalizer, max_frames=120,
                              random_placement=True)  # fmt: skip
-    batch = ds.collate([ds[i * 7] for i in range(32)])
+    picks = [i for i, (clip, _, _) in enumerate(ds.items)
+             if args.label is None or clip.meta.get("content") == args.label]  # fmt: skip
+    if not picks:
+        raise SystemExit(f"no training clips of label {args.label!r}")
+    batch = ds.collate([ds[picks[(i * 7) % len(picks)]] for i in range(32)])
     x, m = batch["features"], batch["mask"]
     vae = MotionVAE(cfg.vae)
     body = body_normalizer(corpus, PLACEMENT_RADIUS, max_frames=20_000)
@@ -152,7 +163,73 @@ def memorise(args: argparse.Namespace) -> None:
             for k, g in BODY_GROUPS.items():
                 sst = (y[:, g] - y[:, g].mean(0)).pow(2).sum()
                 r2[k] = round(1 - float(err[:, g].pow(2).sum() / sst), 3)
-            print(json.dumps({"step": step, "set": args.set, **r2}), flush=True)
+            kept = energy_kept(
+                corpus.normalizer.denormalize(x),
+                corpus.normalizer.denormalize(out.x_hat),
+                m,
+                cfg.vae,
+            )
+            print(json.dumps({"step": step, "set": args.set, **r2, **kept}), flush=True)
+
+
+def energy_kept(
+    real: torch.Tensor, recon: torch.Tensor, mask: torch.Tensor, vae_cfg
+) -> dict[str, float]:
+    """Reconstructed / real root-relative motion energy (mean joint speed) of wrists, ankles.
+
+    The reconstruction's positions are fused with its velocities first, as the pipeline and
+    ``reconstruct`` decode them (raw decoded positions jitter frame to frame).
+    """
+    from umf.eval.motion_stats import L_ANKLE, L_WRIST, PELVIS, R_ANKLE, R_WRIST
+    from umf.representation import features_to_joints, fuse_positions
+
+    def speeds(feats: torch.Tensor, idx: list[int], fuse: bool) -> list[torch.Tensor]:
+        out = []
+        for f, m in zip(feats, mask, strict=True):
+            f = f[m]
+            if fuse:
+                f = fuse_positions(f, vae_cfg.position_fusion, vae_cfg.root_fusion)
+            j = features_to_joints(f)
+            rel = j[:, idx] - j[:, PELVIS : PELVIS + 1]
+            out.append((rel[1:] - rel[:-1]).norm(dim=-1).flatten())
+        return out
+
+    kept = {}
+    for name, idx in (("wrists", [L_WRIST, R_WRIST]), ("ankles", [L_ANKLE, R_ANKLE])):
+        a = torch.cat(speeds(recon, idx, True)).mean()
+        b = torch.cat(speeds(real, idx, False)).mean()
+        kept[f"{name}_energy_kept"] = round(float(a / b), 3)
+    return kept
+
+
+def labels(args: argparse.Namespace) -> None:
+    from umf.eval.motion_stats import LABELS, motion_statistics
+    from umf.representation import features_to_joints
+
+    torch.set_num_threads(args.threads)
+    corpus = Corpus.load(args.corpus)
+    vae, _ = load_vae(Path(args.model))
+    by_label: dict[str, list[np.ndarray]] = {}
+    for split in ("train", "val", "test"):
+        for clip in corpus.split_clips(split):
+            label = clip.meta.get("content")
+            if clip.num_people == 1 and label in LABELS:
+                by_label.setdefault(label, []).append(corpus.clip_features(clip)[0][:300])
+
+    def joints(feats: list[np.ndarray]) -> list[np.ndarray]:
+        return [features_to_joints(torch.as_tensor(f, dtype=torch.float32)).numpy() for f in feats]
+
+    print("| label | clips | statistic | real (median) | reconstructed (median) |")
+    print("|---|---:|---|---:|---:|")
+    for label in LABELS:
+        feats = by_label.get(label, [])[: args.clips]
+        if not feats:
+            continue
+        real = [motion_statistics(j) for j in joints(feats)]
+        rec = [motion_statistics(j) for j in joints(reconstruct(vae, corpus.normalizer, feats))]
+        for stat in dict.fromkeys((*LABELS[label][1], "pelvis_speed")):
+            r, c = np.median([x[stat] for x in real]), np.median([x[stat] for x in rec])
+            print(f"| {label} | {len(feats)} | {stat} | {r:.2f} | {c:.2f} |", flush=True)
 
 
 def main() -> None:
@@ -166,9 +243,15 @@ def main() -> None:
     m = sub.add_parser("memorise")
     m.add_argument("--corpus", default="out/corpus")
     m.add_argument("--steps", type=int, default=100)
+    m.add_argument("--label", default=None, help="crops of this label's clips only")
     m.add_argument("--set", action="append", default=[], help="config override a.b=value")
+    lab = sub.add_parser("labels")
+    lab.add_argument("model", help="model directory or RUN/vae")
+    lab.add_argument("--corpus", default="out/corpus")
+    lab.add_argument("--clips", type=int, default=24, help="clips per label, at most")
+    lab.add_argument("--threads", type=int, default=1)
     args = ap.parse_args()
-    (score if args.cmd == "score" else memorise)(args)
+    {"score": score, "memorise": memorise, "labels": labels}[args.cmd](args)
 
 
 if __name__ == "__main__":
