@@ -1,18 +1,23 @@
-"""Retrain both flows of a model on one GPU, side by side, within a fixed time budget.
+"""Train a model's flows on one GPU, side by side, within a fixed time budget.
 
 P-Flow and S-Flow only depend on the frozen VAE, so on a lent GPU with a hard time limit
 they can train at the same time in two processes (the small family's flows are far from
 filling a GPU: a step is launch-bound, not compute-bound). The VAE is taken from an
-existing model directory (the bundled one by default) and is not retrained.
+existing model directory (the bundled one by default) and is not retrained, unless
+``--vae`` is given: then a new VAE of the ``small`` family (with the ``--set`` options)
+trains first, and the flows train on it.
 
     python scripts/corpus_pack.py unpack .gpu out/corpus          # on the GPU node
     python scripts/gpu_flows_train.py 540 --set train_pflow.max_steps=3500 ...
+    python scripts/gpu_flows_train.py 560 --vae --set vae.num_tokens=32 --set vae.token_span=5.0 \
+        --set train_vae.max_steps=2000 --set train_vae.batch_size=128 ...
 
 The first argument is the wall-clock budget in seconds: a stage still running then is
 stopped and the model is exported from the best checkpoints written so far (atomic, every
 ``ckpt_every`` steps). Environment: ``OUT`` (exported model, metrics and logs), ``RUNS``
 (run directory parent), ``CORPUS``, ``MODEL`` (where the frozen VAE comes from),
-``PFLOW_WORKERS`` / ``SFLOW_WORKERS`` (loader processes while the latent banks are built).
+``PFLOW_WORKERS`` / ``SFLOW_WORKERS`` (loader processes while the latent banks are built),
+``VAE_WORKERS``.
 """
 
 from __future__ import annotations
@@ -46,21 +51,39 @@ def child(stage: str, run: Path, plan: Path) -> None:
     print(f"== {stage}: {time.time() - t0:.1f} s in all; {res}", flush=True)
 
 
-def parent(budget: float, overrides: list[str]) -> None:
-    from umf.config import UMFConfig, set_option
+def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
+    from umf.config import UMFConfig, family_config, set_option
     from umf.train.run import check_run_config, export_model
 
     t0 = time.time()
     run = RUNS / "flows"
-    (run / "vae").mkdir(parents=True, exist_ok=True)
-    if not (run / "vae" / "best").exists():
-        shutil.copytree(MODEL, run / "vae" / "best")
-    cfg = UMFConfig.load_yaml(MODEL / "config.json")
+    if new_vae:
+        cfg = family_config("small")
+    else:
+        (run / "vae").mkdir(parents=True, exist_ok=True)
+        if not (run / "vae" / "best").exists():
+            shutil.copytree(MODEL, run / "vae" / "best")
+        cfg = UMFConfig.load_yaml(MODEL / "config.json")
     for o in overrides:
         cfg = set_option(cfg, o)
     check_run_config(cfg)
+    run.mkdir(parents=True, exist_ok=True)
     cfg.save_yaml(run / "plan.yaml")
     OUT.mkdir(parents=True, exist_ok=True)
+    if new_vae:
+        vae_cfg = set_option(cfg, f"train_vae.num_workers={os.environ.get('VAE_WORKERS', '12')}")
+        (run / "vae-cfg").mkdir(exist_ok=True)
+        vae_cfg.save_yaml(run / "vae-cfg" / "plan.yaml")
+        with open(OUT / "vae.log", "w") as log:
+            p = subprocess.Popen([sys.executable, __file__, "child", "vae", str(run),
+                                  str(run / "vae-cfg" / "plan.yaml")],
+                                 stdout=log, stderr=subprocess.STDOUT)  # fmt: skip
+            rc = p.wait()
+        if (run / "vae" / "metrics.csv").exists():
+            shutil.copy(run / "vae" / "metrics.csv", OUT / "vae-metrics.csv")
+        if rc != 0:
+            raise SystemExit(f"VAE training failed (exit {rc}); see {OUT / 'vae.log'}")
+        print(f"VAE done at {time.time() - t0:.0f} s", flush=True)
     procs = {}
     for stage, workers in (("pflow", "PFLOW_WORKERS"), ("sflow", "SFLOW_WORKERS")):
         w = os.environ.get(workers, "8")
@@ -104,4 +127,4 @@ if __name__ == "__main__":
     else:
         args = sys.argv[2:]
         sets = [args[i + 1] for i in range(len(args) - 1) if args[i] == "--set"]
-        parent(float(sys.argv[1]), sets)
+        parent(float(sys.argv[1]), sets, new_vae="--vae" in args)
