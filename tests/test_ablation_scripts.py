@@ -14,6 +14,7 @@ RESULTS = ROOT / "results" / "ablations"
 
 def test_ablations_driver_is_valid_bash():
     subprocess.run(["bash", "-n", str(ROOT / "scripts" / "ablations.sh")], check=True)
+    subprocess.run(["bash", "-n", str(ROOT / "scripts" / "ablation_sflow_current.sh")], check=True)
 
 
 def test_tables_are_rebuilt_from_the_reports(tmp_path):
