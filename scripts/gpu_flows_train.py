@@ -12,12 +12,15 @@ trains first, and the flows train on it.
     python scripts/gpu_flows_train.py 560 --vae --set vae.num_tokens=32 --set vae.token_span=5.0 \
         --set train_vae.max_steps=2000 --set train_vae.batch_size=128 ...
 
-The first argument is the wall-clock budget in seconds: a stage still running then is
-stopped and the model is exported from the best checkpoints written so far (atomic, every
-``ckpt_every`` steps). Environment: ``OUT`` (exported model, metrics and logs), ``RUNS``
-(run directory parent), ``CORPUS``, ``MODEL`` (where the frozen VAE comes from),
-``PFLOW_WORKERS`` / ``SFLOW_WORKERS`` (loader processes while the latent banks are built),
-``VAE_WORKERS``.
+The first argument is the wall-clock budget in seconds for everything: a flow still
+running then is stopped and the model is exported from the best checkpoints written so far
+(atomic, every ``ckpt_every`` steps); a VAE still running then ends the run (the flows need
+it finished). Size ``max_steps`` so that each cosine schedule ends within the budget: a
+stopped stage has not annealed its learning rate. The exported ``config.json`` records the
+loader settings of whichever flow finished last. Environment: ``OUT`` (exported model,
+metrics and logs), ``RUNS`` (run directory parent), ``CORPUS``, ``MODEL`` (where the frozen
+VAE comes from), ``PFLOW_WORKERS`` / ``SFLOW_WORKERS`` / ``VAE_WORKERS`` (loader
+processes; the flows' while their latent banks are built).
 """
 
 from __future__ import annotations
@@ -78,11 +81,12 @@ def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
             p = subprocess.Popen([sys.executable, __file__, "child", "vae", str(run),
                                   str(run / "vae-cfg" / "plan.yaml")],
                                  stdout=log, stderr=subprocess.STDOUT)  # fmt: skip
-            rc = p.wait()
+            rc = wait_until(p, t0 + budget)
         if (run / "vae" / "metrics.csv").exists():
             shutil.copy(run / "vae" / "metrics.csv", OUT / "vae-metrics.csv")
-        if rc != 0:
-            raise SystemExit(f"VAE training failed (exit {rc}); see {OUT / 'vae.log'}")
+        if rc != 0:  # the flows need a finished VAE: a stopped or failed one ends the run
+            raise SystemExit(f"VAE training stopped (exit {rc}, budget {budget:.0f} s); "
+                             f"see {OUT / 'vae.log'}")  # fmt: skip
         print(f"VAE done at {time.time() - t0:.0f} s", flush=True)
     procs = {}
     for stage, workers in (("pflow", "PFLOW_WORKERS"), ("sflow", "SFLOW_WORKERS")):
@@ -96,17 +100,8 @@ def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
             [sys.executable, __file__, "child", stage, str(run), str(stage_run / "plan.yaml")],
             stdout=log, stderr=subprocess.STDOUT,
         )  # fmt: skip
-    while any(p.poll() is None for p in procs.values()):
-        if time.time() - t0 > budget:
-            for stage, p in procs.items():
-                if p.poll() is None:
-                    print(f"budget reached: stopping {stage}", flush=True)
-                    p.terminate()
-            for p in procs.values():
-                p.wait(timeout=60)
-            break
-        time.sleep(2)
-    print({s: p.returncode for s, p in procs.items()}, f"{time.time() - t0:.0f} s", flush=True)
+    codes = {stage: wait_until(p, t0 + budget) for stage, p in procs.items()}
+    print(codes, f"{time.time() - t0:.0f} s", flush=True)
     for stage in ("pflow", "sflow"):  # each stage's best weights, whatever happened to the other
         best = run / stage / "best" / f"{stage}.safetensors"
         if best.exists():
@@ -119,6 +114,28 @@ def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
             shutil.copy(run / stage / "metrics.csv", OUT / f"{stage}-metrics.csv")
     shutil.copy(run / "plan.yaml", OUT / "plan.yaml")
     print(f"DONE {time.time() - t0:.0f} s", flush=True)
+    failed = {s: c for s, c in codes.items() if c not in (0, STOPPED)}
+    if failed:  # exported from the best checkpoints written before the failure
+        raise SystemExit(f"stage(s) failed: {failed}; see their logs in {OUT}")
+
+
+STOPPED = -15  # a stage stopped at the budget (SIGTERM): its best checkpoint is kept
+
+
+def wait_until(proc: subprocess.Popen, deadline: float) -> int:
+    """Wait for ``proc`` until ``deadline`` (time.time()); then stop it (SIGTERM, then
+    SIGKILL after 30 s). Returns its exit code."""
+    while proc.poll() is None and time.time() < deadline:
+        time.sleep(2)
+    if proc.poll() is None:
+        print(f"budget reached: stopping {proc.args[3]}", flush=True)
+        proc.terminate()
+        try:
+            proc.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+    return proc.returncode
 
 
 if __name__ == "__main__":
