@@ -89,3 +89,29 @@ def test_labels_with_few_real_clips_are_named_and_shown():
     assert "| kick | A person kicks. | ankle_energy | 1 |" in table
     passes = MS.label_passes(rows)
     assert passes == {"kick": True}  # its own exact values pass
+
+
+def test_backward_is_measured_against_the_facing_direction():
+    """A person facing +X who travels along -X walks backward; along +Z, sideways."""
+    turned = rest_pose()[:, [2, 1, 0]] * np.array([1.0, 1.0, -1.0])  # 90 degrees about Y
+    from umf.representation import facing_direction
+
+    f = facing_direction(torch.from_numpy(turned[None]))[0].numpy()
+    np.testing.assert_allclose(f, [1, 0, 0], atol=1e-6)
+    t = np.arange(120) / FPS
+    back = np.repeat(turned[None], 120, axis=0)
+    back[..., 0] -= 0.7 * t[:, None]
+    side = np.repeat(turned[None], 120, axis=0)
+    side[..., 2] += 0.7 * t[:, None]
+    assert abs(MS.motion_statistics(back)["backward_speed"] - 0.7) < 1e-6
+    assert abs(MS.motion_statistics(side)["backward_speed"]) < 1e-6
+    assert abs(MS.motion_statistics(side)["pelvis_speed"] - 0.7) < 1e-6
+
+
+def test_pelvis_speed_is_path_length_not_displacement():
+    """Walking out and back covers distance although it ends where it started."""
+    t = np.arange(121) / FPS
+    x = np.where(t <= 2.0, t, 4.0 - t)  # 1 m/s out for 2 s, then back
+    walk = still(121)
+    walk[..., 2] += x[:, None]
+    assert abs(MS.motion_statistics(walk)["pelvis_speed"] - 1.0) < 1e-6
