@@ -203,18 +203,13 @@ def energy_kept(
 
 
 def labels(args: argparse.Namespace) -> None:
-    from umf.eval.motion_stats import LABELS, motion_statistics
+    from umf.eval.motion_stats import LABELS, motion_statistics, real_clips_by_label
     from umf.representation import features_to_joints
 
     torch.set_num_threads(args.threads)
     corpus = Corpus.load(args.corpus)
     vae, _ = load_vae(Path(args.model))
-    by_label: dict[str, list[np.ndarray]] = {}
-    for split in ("train", "val", "test"):
-        for clip in corpus.split_clips(split):
-            label = clip.meta.get("content")
-            if clip.num_people == 1 and label in LABELS:
-                by_label.setdefault(label, []).append(corpus.clip_features(clip)[0][:300])
+    clips = real_clips_by_label(corpus)
 
     def joints(feats: list[np.ndarray]) -> list[np.ndarray]:
         return [features_to_joints(torch.as_tensor(f, dtype=torch.float32)).numpy() for f in feats]
@@ -222,7 +217,7 @@ def labels(args: argparse.Namespace) -> None:
     print("| label | clips | statistic | real (median) | reconstructed (median) |")
     print("|---|---:|---|---:|---:|")
     for label in LABELS:
-        feats = by_label.get(label, [])[: args.clips]
+        feats = [corpus.clip_features(c)[0][:300] for c in clips.get(label, [])[: args.clips]]
         if not feats:
             continue
         real = [motion_statistics(j) for j in joints(feats)]

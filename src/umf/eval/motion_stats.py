@@ -151,14 +151,20 @@ def few_real_clips(rows: Sequence[LabelCheck], least: int = FEW_REAL) -> dict[st
     return {r.label: r.real_count for r in rows if 0 < r.real_count < least}
 
 
-def real_joints_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),
-                         max_frames: int = 300) -> dict[str, list[Array]]:  # fmt: skip
-    """Joints (T, 22, 3) of the corpus's single-person clips of each label in ``LABELS``
-    (at most ``max_frames`` frames each, the longest motion the pipeline makes)."""
-    out: dict[str, list[Array]] = {}
+def real_clips_by_label(corpus, splits: Sequence[str] = ("train", "val", "test")) -> dict:
+    """The corpus's single-person clips of each label in ``LABELS``, in corpus order."""
+    out: dict[str, list] = {}
     for split in splits:
         for clip in corpus.split_clips(split):
             label = clip.meta.get("content")
             if clip.num_people == 1 and label in LABELS:
-                out.setdefault(label, []).append(np.asarray(clip.joints[0][:max_frames]))
+                out.setdefault(label, []).append(clip)
     return out
+
+
+def real_joints_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),
+                         max_frames: int = 300) -> dict[str, list[Array]]:  # fmt: skip
+    """Joints (T, 22, 3) of the corpus's single-person clips of each label in ``LABELS``
+    (at most ``max_frames`` frames each, the longest motion the pipeline makes)."""
+    return {label: [np.asarray(c.joints[0][:max_frames]) for c in clips]
+            for label, clips in real_clips_by_label(corpus, splits).items()}  # fmt: skip
