@@ -94,7 +94,9 @@ def test_quick_eval_end_to_end(setup):
     for name in ("pairs", "groups"):
         assert m["relations"][name]["real"]["scene_accuracy"] == 1.0
         assert 0.0 <= m["relations"][name]["tiny"]["scene_accuracy"] <= 1.0
-        assert set(m["physics"][name]) == {"real", "tiny", "reaction-only"}
+        # the main model is also scored as users receive it; variants only raw
+        assert set(m["physics"][name]) == {"real", "tiny", "reaction-only", "tiny, delivered"}
+        assert "tiny, delivered" in m["relations"][name]
         assert m["physics"][name]["real"]["penetration_cm"][0] == 0.0  # composer keeps apart
     assert m["relations"]["all"]["real"]["num_scenes"] == 8 + 3
     assert {r["variant"] for r in m["accumulation"]} == {"tiny", "reaction-only"}
@@ -106,6 +108,28 @@ def test_quick_eval_end_to_end(setup):
     assert text.startswith("# UMF evaluation: tiny")
     assert "umf eval --checkpoint" in text and "--quick" in text
     assert "groups of 8 instead of 96" in text and "![examples](examples.png)" in text
+    assert "inter-person penetration (cm) ↓, groups, delivered" in text
+    assert "split" not in m["meta"] or m["meta"]["split"] == "test"
+
+
+def test_val_split_chooses_without_the_test_set(setup):
+    """--split val scores the val pairs (groups exist only in test) and says so."""
+    root, out = setup, setup / "val"
+    args = ["eval", "--checkpoint", str(root / "tiny" / "model"), "--evaluator",
+            str(root / "evrun"), "--corpus", str(root / "corpus"), "--out", str(out), "--quick",
+            "--split", "val", "--mm-prompts", "0", "--no-progress", "--device", "cpu"]  # fmt: skip
+    r = CliRunner().invoke(app, args)
+    assert r.exit_code == 0, r.output
+    m = json.loads((out / "metrics.json").read_text())
+    assert m["meta"]["split"] == "val" and m["plan"]["split"] == "val"
+    corpus = Corpus.load(root / "corpus")
+    assert m["relations"]["pairs"]["real"]["num_scenes"] == len(corpus.scenes["val"]) == 2
+    assert "groups" not in m["relations"] and "groups" not in m["physics"]
+    assert any("no val_groups scenes" in n for n in m["notes"])
+    text = (out / "report.md").read_text()
+    assert "**val split**" in text and "--split val" in text
+    with pytest.raises(UMFError, match="--split"):
+        R.make_plan(split="train")
 
 
 def test_quick_eval_of_the_bundled_model(setup):

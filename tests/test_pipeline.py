@@ -9,7 +9,8 @@ import torch
 from conftest import BANDAI_FIXTURE, TINY_MODEL, prepare_fixture_corpus
 from umf.config import set_option, small_config
 from umf.errors import UMFError
-from umf.pipeline import UMFPipeline
+from umf.pipeline import UMFPipeline, delivered_joints
+from umf.representation import CONTACT
 from umf.train.run import Launch, export_model, train_stage
 
 TINY = list(TINY_MODEL)
@@ -227,6 +228,23 @@ def test_ten_people(trained):
     assert np.allclose(s.joints, raw.joints + shifts[:, None, None, :], atol=1e-5)
     with pytest.raises(UMFError, match="people"):
         pipe("hi", num_people=17)
+
+
+def test_delivered_joints_redo_the_default_call(trained):
+    """`umf eval` scores fit=False scenes also "as delivered": it must get what users get."""
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    full = pipe("four people dance in a circle", num_people=4, seconds=1.5, seed=2)[0]
+    raw = pipe("four people dance in a circle", num_people=4, seconds=1.5, seed=2,
+               separate=False, fit=False)[0]  # fmt: skip
+    got = delivered_joints(raw.raw_joints, raw.features[..., CONTACT])
+    assert got.shape == full.joints.shape == (4, 45, 22, 3)
+    assert np.allclose(got, full.joints, atol=1e-4)
+    assert np.abs(got - raw.raw_joints).max() > 1e-3  # the clean-up changed something
+    one = pipe("a person waves", num_people=1, seconds=1.0, seed=0)[0]  # fitted, not separated
+    bare = pipe("a person waves", num_people=1, seconds=1.0, seed=0, fit=False)[0]
+    assert np.allclose(delivered_joints(bare.raw_joints, bare.features[..., CONTACT]),
+                       one.joints, atol=1e-4)  # fmt: skip
 
 
 def _umf(*args: str):

@@ -21,6 +21,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
+from umf.anchoring import anchor_people
 from umf.config import UMFConfig
 from umf.errors import UMFError
 from umf.kinematics import fit_bodies
@@ -283,27 +284,32 @@ class UMFPipeline:
             feats = transform_features(feats.cpu(), frame, inverse=True)
             feats[:, 0] = assemble_features(torch.from_numpy(actor).float(), rot6d)
         check_finite(feats, "the decoded motion (VAE and normaliser)")
+        feats = feats.cpu()
+        # the floor: y = 0 in the canonical frame, the actor's lowest joint in theirs
+        floor = 0.0 if frame is None else float(frame.origin[1])
+        clean = [frame is None or k > 0 for k in range(num_people)]  # not the actor
+        contacts = feats[..., CONTACT].numpy()
+        decoded = features_to_joints(feats).numpy()
+        # what the fit starts from: generated people's planted feet anchored (umf.anchoring)
+        start = [anchor_people(decoded[i], contacts[i], floor, clean) if fit else decoded[i]
+                 for i in range(b)]  # fmt: skip
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
         if separate and num_people > 1:
-            feats = feats.cpu()
             for i in range(b):
-                _, shift = separate_people(features_to_joints(feats[i]).numpy())
-                shifts[i] = shift
+                _, shifts[i] = separate_people(start[i])
             offset = torch.from_numpy(shifts).to(feats).repeat(1, 1, 22)  # (B, N, 66)
             feats[..., :66] = feats[..., :66] + offset[:, :, None, :]
         joints = features_to_joints(feats)
         check_finite(joints, "the generated joints")
-        # the floor: y = 0 in the canonical frame, the actor's lowest joint in theirs
-        floor = 0.0 if frame is None else float(frame.origin[1])
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people, "floor": floor}
         scenes = []
         for i in range(b):
-            raw = joints[i].cpu().numpy()
-            f = feats[i].cpu().numpy()
+            raw = joints[i].numpy()
+            f = feats[i].numpy()
             bodies = None
             if fit:
-                clean = [frame is None or k > 0 for k in range(num_people)]  # not the actor
-                bodies = fit_bodies(raw, f[..., CONTACT], floor, clean)
+                moved = start[i] + shifts[i][:, None, None, :]
+                bodies = fit_bodies(moved, contacts[i], floor, clean)
             extra = {"shifts": shifts[i].tolist(), "sample_index": indices[i]}
             scenes.append(Scene(raw if bodies is None else bodies.joints(), f, prompts[i],
                                 self.config.fps, seed, self.name, {**meta, **extra}, raw,
@@ -344,3 +350,19 @@ class UMFPipeline:
 def default_model_dir() -> Path:
     """Where the bundled model lives inside the installed package."""
     return Path(__file__).parent / "assets" / "model"
+
+
+def delivered_joints(raw: np.ndarray, contacts: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """A generated scene's joints as the default pipeline hands them out, from its raw
+    decoded joints (N, T, 22, 3) and contact labels (N, T, 4): planted feet anchored
+    (:mod:`umf.anchoring`), people 2..N separated (:mod:`umf.separation`), then everyone
+    fitted as one rigid body with planted feet pinned and kept off the ``floor``
+    (:mod:`umf.kinematics`).
+
+    The same steps as ``UMFPipeline.__call__(separate=True, fit=True)``, applied after the
+    fact, so evaluation can score a ``fit=False`` scene both raw and as users receive it.
+    """
+    joints = anchor_people(np.asarray(raw), np.asarray(contacts), floor)
+    if joints.shape[0] > 1:
+        joints, _ = separate_people(joints)
+    return fit_bodies(joints, contacts, floor, True).joints()

@@ -78,20 +78,26 @@ def evaluate(
         help="Generate at lengths rounded up to multiples of this many frames, then cut back "
         "(fewer pipeline calls). Default 1 (exact); 15 with --quick.",
     ),
+    split: str = typer.Option(
+        "test", "--split",
+        help="test (the report) or val (to choose sampling settings or checkpoints: its "
+        "pairs, no groups).",
+    ),
     device: str = typer.Option("auto", "--device", help="auto, cpu or cuda[:i]."),
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:  # fmt: skip
-    """Score a model (and variants) on the test split; write report.md, metrics.json, PNGs."""
+    """Score a model (and variants) on the test split (or val); write report.md, metrics.json,
+    PNGs."""
     from umf.eval.report import EvalRequest, make_plan, model_label, parse_variant, run_eval
 
-    plan = make_plan(quick, replications, mm_prompts, mm_samples, seed, batch, length_step)
+    plan = make_plan(quick, replications, mm_prompts, mm_samples, seed, batch, length_step, split)
     variants = [parse_variant(v) for v in variant]
     command = command_line([
         ("--checkpoint", checkpoint), ("--evaluator", evaluator), ("--corpus", corpus),
         ("--out", out), ("--quick", quick), ("--replications", replications),
         ("--mm-prompts", mm_prompts), ("--mm-samples", mm_samples), ("--variant", variant),
         ("--seed", seed or None), ("--batch", batch if batch != 64 else None),
-        ("--length-step", length_step),
+        ("--length-step", length_step), ("--split", split if split != "test" else None),
         ("--device", device if device != "auto" else None),
     ])  # fmt: skip
     device = check_device(device)

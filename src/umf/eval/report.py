@@ -41,7 +41,8 @@ from umf.eval.physics import physics_report
 from umf.eval.protocol import ProtocolConfig, corpus_items, score_protocol
 from umf.eval.relations import real_scene_joints, relation_accuracy
 from umf.io import atomic_path, write_json_atomic, write_text_atomic
-from umf.pipeline import Scene, UMFPipeline
+from umf.pipeline import Scene, UMFPipeline, delivered_joints
+from umf.representation import CONTACT
 
 Log = Callable[[str], None]
 MIN_FRAMES = 15  # the pipeline's shortest scene
@@ -90,7 +91,12 @@ class EvalPlan:
     seed: int = 0
     examples: int = 3
     motion_samples: int = 16  # generated people per label for the motion statistics (0: skip)
+    split: str = "test"  # "val" to choose settings (sampling, checkpoints) without the test set
 
+
+# Scored splits: "test" reports; "val" chooses (its pairs, no groups: groups exist only as
+# the zero-shot test set). A setting chosen on "test" would flatter the report.
+SPLITS = ("test", "val")
 
 QUICK = EvalPlan(
     quick=True, replications=2, mm_prompts=8, mm_samples=5, accumulation_sizes=(2, 3, 4),
@@ -107,11 +113,14 @@ def make_plan(
     seed: int = 0,
     batch: int = 64,
     length_step: int | None = None,
+    split: str = "test",
 ) -> EvalPlan:
     """The plan of a run: full protocol defaults or --quick, then explicit overrides."""
+    if split not in SPLITS:
+        raise UMFError(f"--split must be one of {', '.join(SPLITS)}, got {split!r}")
     plan = QUICK if quick else EvalPlan()
     over = {"replications": replications, "mm_prompts": mm_prompts, "mm_samples": mm_samples,
-            "length_step": length_step}  # fmt: skip
+            "length_step": length_step, "split": split}  # fmt: skip
     plan = dataclasses.replace(plan, seed=seed, batch=batch,
                                **{k: v for k, v in over.items() if v is not None})  # fmt: skip
     if plan.replications < 1:
@@ -234,6 +243,11 @@ def _joints(scene: Scene) -> np.ndarray:
     """What the physics and accumulation sections score: the decoded positions
     (``raw_joints``), not the exports' fitted bodies (scenes are generated ``fit=False``)."""
     return scene.raw_joints
+
+
+def _joints_contacts(scene: Scene) -> tuple[np.ndarray, np.ndarray]:
+    """The decoded positions and contact labels (N, T, 4): enough to redo the delivery."""
+    return scene.raw_joints, np.ascontiguousarray(scene.features[..., CONTACT])
 
 
 @dataclass
@@ -395,21 +409,22 @@ def protocol_section(
     log: Log,
 ) -> dict[str, Any] | None:
     """The protocol table of one evaluator kind: real vs every contender."""
-    items = corpus_items(corpus, "test", kind)
+    items = corpus_items(corpus, plan.split, kind)
     people = KINDS[kind]
     label = "two-person" if kind == "interaction" else "single-person"
     if len(items) < 3:
-        notes.append(f"{label} protocol skipped: test items {len(items)}, at least 3 needed.")
+        notes.append(f"{label} protocol skipped: {plan.split} items {len(items)}, at least 3 "
+                     "needed.")  # fmt: skip
         return None
     group = min(96, len(items))
     if group < 96:
-        notes.append(f"{label} protocol: {len(items)} test items, so R-precision groups of "
+        notes.append(f"{label} protocol: {len(items)} {plan.split} items, so R-precision groups of "
                      f"{group} instead of 96 (not comparable with published numbers).")  # fmt: skip
     longest = min(c.max_frames for c in contenders)
     clipped = sum(it.num_frames > longest for it in items)
     if clipped:
-        notes.append(f"{label} protocol: {clipped} of {len(items)} test items are longer than "
-                     f"the models' {longest} frames; they are generated at {longest}.")  # fmt: skip
+        notes.append(f"{label} protocol: {clipped} of {len(items)} {plan.split} items are longer "
+                     f"than the models' {longest} frames; generated at {longest}.")  # fmt: skip
     cfg = ProtocolConfig(
         replications=plan.replications, group=group, mm_prompts=plan.mm_prompts,
         mm_samples=plan.mm_samples, mm_pairs=plan.mm_pairs, seed=plan.seed,
@@ -433,7 +448,8 @@ def protocol_section(
         res = score_protocol(evaluator, items, c.features_fn(people), cfg, log)
         results.setdefault(REAL, res["real"])
         results[c.name] = res["generated"]
-    return {"items": len(items), "group": group, "people": people, "results": results}
+    return {"items": len(items), "group": group, "people": people, "split": plan.split,
+            "results": results}  # fmt: skip
 
 
 def scene_records(corpus: Corpus, split: str, limit: int | None) -> list[dict[str, Any]]:
@@ -443,18 +459,21 @@ def scene_records(corpus: Corpus, split: str, limit: int | None) -> list[dict[st
 
 
 def generate_records(
-    c: Contender, records: Sequence[dict[str, Any]], seed: int
-) -> list[np.ndarray]:
-    """Generated joints for scene records: their captions, sizes and lengths."""
+    c: Contender,
+    records: Sequence[dict[str, Any]],
+    seed: int,
+    keep: Callable[[Scene], Any] = _joints,
+) -> list[Any]:
+    """``keep(scene)`` (default: joints) for scene records: their captions, sizes, lengths."""
     out: list[np.ndarray | None] = [None] * len(records)
     for people in sorted({r["num_people"] for r in records}):
         idx = [i for i, r in enumerate(records) if r["num_people"] == people]
         caps = [records[i]["captions"][0] for i in idx]
         frames = [records[i]["num_frames"] for i in idx]
-        joints = c.generate(caps, frames, people, seed + people, f"scenes of {people}", _joints)
+        joints = c.generate(caps, frames, people, seed + people, f"scenes of {people}", keep)
         for i, j in zip(idx, joints, strict=True):
             out[i] = j
-    return out  # type: ignore[return-value]
+    return out
 
 
 def proportion_ci(p: float, n: int) -> float:
@@ -482,12 +501,23 @@ def physics_summary(joints: Sequence[np.ndarray]) -> dict[str, Any]:
 
 @dataclass
 class SceneSet:
-    """Test records with their real joints and every contender's generated joints."""
+    """Test records with their real joints and every contender's generated joints.
+
+    ``delivered`` holds the main model's same scenes as the default pipeline hands them
+    out (separated, fitted, feet pinned: :func:`umf.pipeline.delivered_joints`), under the
+    column name ``"<model>, delivered"``; ``generated`` is the raw model output.
+    """
 
     name: str
     records: list[dict[str, Any]]
     real: list[np.ndarray]
     generated: dict[str, list[np.ndarray]] = field(default_factory=dict)
+    delivered: dict[str, list[np.ndarray]] = field(default_factory=dict)
+
+
+def delivered_name(model: str) -> str:
+    """The column of a model's delivered scenes."""
+    return f"{model}, delivered"
 
 
 def scene_sets(
@@ -495,8 +525,9 @@ def scene_sets(
 ) -> list[SceneSet]:
     """Test pairs and zero-shot groups, real and generated (shared by sections 2, 3, 6)."""
     sets = []
-    for name, split, limit in (("pairs", "test", plan.pair_scenes),
-                               ("groups", "test_groups", plan.group_scenes)):  # fmt: skip
+    groups = "test_groups" if plan.split == "test" else f"{plan.split}_groups"
+    for name, split, limit in (("pairs", plan.split, plan.pair_scenes),
+                               ("groups", groups, plan.group_scenes)):  # fmt: skip
         records = scene_records(corpus, split, limit)
         total = len(corpus.scenes.get(split, []))
         if not records:
@@ -512,7 +543,12 @@ def scene_sets(
         s = SceneSet(name, records, real_scene_joints(corpus, records))
         for c in contenders:
             log(f"relations/physics, {c.name}: generating {len(records)} {name}")
-            s.generated[c.name] = generate_records(c, records, plan.seed + 200_000)
+            if c.role != "model":
+                s.generated[c.name] = generate_records(c, records, plan.seed + 200_000)
+                continue
+            both = generate_records(c, records, plan.seed + 200_000, _joints_contacts)
+            s.generated[c.name] = [j for j, _ in both]
+            s.delivered[delivered_name(c.name)] = [delivered_joints(j, k) for j, k in both]
         sets.append(s)
     return sets
 
@@ -523,11 +559,14 @@ def relations_section(sets: Sequence[SceneSet]) -> dict[str, dict[str, Any]]:
     for s in sets:
         out[s.name] = {REAL: accuracy_summary(s.records, s.real)}
         out[s.name] |= {n: accuracy_summary(s.records, j) for n, j in s.generated.items()}
+        out[s.name] |= {n: accuracy_summary(s.records, j) for n, j in s.delivered.items()}
     if len(sets) > 1:
         recs = [r for s in sets for r in s.records]
         out["all"] = {REAL: accuracy_summary(recs, [j for s in sets for j in s.real])}
         for n in sets[0].generated:
             out["all"][n] = accuracy_summary(recs, [j for s in sets for j in s.generated[n]])
+        for n in sets[0].delivered:
+            out["all"][n] = accuracy_summary(recs, [j for s in sets for j in s.delivered[n]])
     return out
 
 
@@ -537,12 +576,13 @@ def physics_section(sets: Sequence[SceneSet]) -> dict[str, dict[str, Any]]:
     for s in sets:
         out[s.name] = {REAL: physics_summary(s.real)}
         out[s.name] |= {n: physics_summary(j) for n, j in s.generated.items()}
+        out[s.name] |= {n: physics_summary(j) for n, j in s.delivered.items()}
     return out
 
 
-def accumulation_prompts(corpus: Corpus, count: int) -> list[str]:
+def accumulation_prompts(corpus: Corpus, count: int, split: str = "test") -> list[str]:
     """Group captions (pair captions when there are no groups), first caption each, unique."""
-    recipes = corpus.scenes.get("test_groups") or corpus.scenes.get("test", [])
+    recipes = corpus.scenes.get(f"{split}_groups") or corpus.scenes.get(split, [])
     prompts = list(dict.fromkeys(r["captions"][0] for r in recipes))
     return prompts[:count]
 
@@ -551,7 +591,7 @@ def accumulation_section(
     corpus: Corpus, contenders: Sequence[Contender], plan: EvalPlan, log: Log
 ) -> list[dict[str, Any]]:
     """The per-person-index study for the model and every reaction-only variant."""
-    prompts = accumulation_prompts(corpus, plan.accumulation_prompts)
+    prompts = accumulation_prompts(corpus, plan.accumulation_prompts, plan.split)
     if not prompts:
         return []
     rows: list[dict[str, Any]] = []
@@ -699,6 +739,20 @@ def headline_rows(results: dict[str, Any], sources: Sequence[str]) -> list[list[
             if name in phys:
                 rows.append([f"{PHYSICS_KEYS[key]}, {name}"] + [fmt(*_pair(phys[name][s][key]))
                                                                  for s in sources])  # fmt: skip
+    # the same scenes as a user's files hold them (separated, fitted, feet pinned)
+    delivered = [delivered_name(s) for s in sources]
+    for name, label in (("pairs", "test pairs"), ("groups", "groups of 3-6")):
+        if any(d in rel.get(name, {}) for d in delivered):
+            rows.append([f"relation accuracy, {label}, delivered ↑"] + [
+                fmt(rel[name][d]["scene_accuracy"], rel[name][d]["scene_accuracy_ci"])
+                if d in rel[name] else "—" for d in delivered
+            ])  # fmt: skip
+        for key in ("penetration_cm", "skate_ratio"):
+            if any(d in phys.get(name, {}) for d in delivered):
+                rows.append([f"{PHYSICS_KEYS[key]}, {name}, delivered"] + [
+                    fmt(*_pair(phys[name][d][key])) if d in phys[name] else "—"
+                    for d in delivered
+                ])  # fmt: skip
     rows.append(["seconds per scene, N=2, batch 1"] + [
         fmt(speed[s]["seconds_per_scene"], speed[s]["seconds_ci"]) if s in speed else "—"
         for s in sources
@@ -712,7 +766,8 @@ def protocol_markdown(section: dict[str, Any], title: str) -> str:
     sources = list(res)
     keys = [k for k in PROTOCOL_KEYS if any(k in v for v in res.values())]
     rows = [[PROTOCOL_KEYS[k]] + [fmt(*_pair(res[s].get(k))) for s in sources] for k in keys]
-    head = (f"{title}: {section['items']} test items, groups of {section['group']}; "
+    head = (f"{title}: {section['items']} {section.get('split', 'test')} items, groups of "
+            f"{section['group']}; "
             "mean ± 95% CI over replications.")  # fmt: skip
     return head + "\n\n" + md_table(["metric", *sources], rows)
 
@@ -812,13 +867,15 @@ def motion_section(corpus: Corpus, contenders: Sequence[Contender], plan: EvalPl
     return out
 
 
-def reconstruction_section(corpus: Corpus, contenders: Sequence[Contender]) -> dict[str, Any]:
-    """VAE reconstructions of the real single-person test clips, per feature group
+def reconstruction_section(
+    corpus: Corpus, contenders: Sequence[Contender], split: str = "test"
+) -> dict[str, Any]:
+    """VAE reconstructions of the real single-person clips of a split, per feature group
     (:mod:`umf.eval.reconstruction`): what the flows can at best reach."""
     from umf.eval.protocol import corpus_items
     from umf.eval.reconstruction import reconstruct, reconstruction_metrics
 
-    items = corpus_items(corpus, "test", "single")
+    items = corpus_items(corpus, split, "single")
     most = contenders[0].max_frames
     real = [it.features[0][:most] for it in items]
     out: dict[str, Any] = {}
@@ -869,6 +926,9 @@ def render_markdown(results: dict[str, Any]) -> str:
     meta, sources = results["meta"], [s["name"] for s in results["sources"]]
     mode = "quick (--quick: small replication counts; not for publication)" if meta["quick"] \
         else "full protocol"  # fmt: skip
+    if meta.get("split", "test") != "test":
+        mode += (f", on the **{meta['split']} split** (for choosing settings; report test "
+                 "numbers)")  # fmt: skip
     out = [f"# UMF evaluation: {meta['model']}", "",
            f"Mode: {mode}. Real data is the upper reference; ↓ lower is better, ↑ higher, "
            "→ closer to real.", "",
@@ -903,7 +963,10 @@ def render_markdown(results: dict[str, Any]) -> str:
         "",
         "Scored on the decoded joints (`Scene.raw_joints`): the raw model output, before "
         "the kinematic fit and foot clean-up that every exported file carries "
-        "(`umf.kinematics`). Relations and error accumulation score them too.",
+        "(`umf.kinematics`). Relations and error accumulation score them too. The column "
+        '"<model>, delivered" scores the same scenes as the default pipeline hands them '
+        "out (`umf.pipeline.delivered_joints`): people 2..N shifted apart on the floor "
+        "(`umf.separation`), then one rigid body each with planted feet pinned.",
         "",
     ]
     if results.get("physics"):
@@ -1001,7 +1064,7 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
     table = accumulation_section(corpus, contenders, plan, log)
     prompt = next((s.records[0]["captions"][0] for s in sets), "two people bow to each other")
     motion = motion_section(corpus, contenders, plan, log) if plan.motion_samples else {}
-    reconstruction = reconstruction_section(corpus, contenders)
+    reconstruction = reconstruction_section(corpus, contenders, plan.split)
     speed = {c.name: speed_section(c, prompt, plan.speed_repeats, plan.seed) for c in contenders}
     if plan.mm_prompts and evaluators:
         notes.append(f"MModality: {plan.mm_prompts} prompts x {plan.mm_samples} samples = "
@@ -1019,7 +1082,7 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
     results = {
         "meta": {
             "model": main.name, "command": req.command, "quick": plan.quick,
-            "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
+            "split": plan.split, "date": datetime.now(UTC).strftime("%Y-%m-%d %H:%M UTC"),
             "machine": machine_info(req.device), "device": req.device,
             "umf_version": __version__, "torch": torch.__version__,
             "corpus": str(req.corpus), "evaluator": str(req.evaluator) if req.evaluator else None,
