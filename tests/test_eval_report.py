@@ -209,6 +209,22 @@ def test_variants_share_the_first_person_only_when_it_is_the_same(setup, monkeyp
     assert len(calls) == 4  # two people: every contender is scored
 
 
+def test_a_model_copy_with_other_guidance_is_another_first_person(setup, tmp_path):
+    """Sampling defaults live in the model's config too: a copy whose P-Flow guidance
+    differs makes other single-person scenes; one whose S-Flow guidance differs does not."""
+    tiny = setup / "tiny" / "model"
+    for name, stage in (("p", "pflow"), ("s", "sflow")):
+        shutil.copytree(tiny, tmp_path / name)
+        cfg = json.loads((tiny / "config.json").read_text())
+        cfg[stage]["guidance"] = 1.5
+        (tmp_path / name / "config.json").write_text(json.dumps(cfg))
+    plan = R.make_plan(quick=True)
+    cs = R.load_contenders(tiny, [("p", tmp_path / "p"), ("s", tmp_path / "s")], "cpu", plan,
+                           progress=False)  # fmt: skip
+    keys = [R.person_one_key(c) for c in cs]
+    assert keys[0] == keys[2] != keys[1]
+
+
 def test_generation_keeps_each_length(setup):
     plan = R.make_plan(quick=True)  # lengths bucketed by 15 frames, then cut back
     (c,) = R.load_contenders(setup / "tiny" / "model", [], "cpu", plan, progress=False)

@@ -357,9 +357,10 @@ def load_contenders(
 
 
 def person_one_key(c: Contender) -> str:
-    """What decides a contender's first person: the VAE, text encoder and P-Flow weights
-    and the P-Flow sampling settings. Equal keys give identical single-person scenes under
-    one seed, so the single-person protocol is scored once per key."""
+    """What decides a contender's first person: the VAE, text encoder and P-Flow weights,
+    the P-Flow sampling settings of the variant and of the model's config. Equal keys give
+    identical single-person scenes under one seed, so the single-person protocol is scored
+    once per key."""
     import hashlib
 
     h = hashlib.sha256()
@@ -369,6 +370,8 @@ def person_one_key(c: Contender) -> str:
             h.update(v.detach().cpu().contiguous().numpy().tobytes())
     sampling = {k: c.settings.get(k) for k in ("pflow_steps", "guidance")}
     h.update(repr(sorted(sampling.items())).encode())
+    cfg = c.pipe.config.to_dict()  # the model's own P-Flow defaults (steps, guidance, solver)
+    h.update(repr([cfg[k] for k in ("fps", "text", "vae", "pflow")]).encode())
     return h.hexdigest()
 
 
@@ -724,11 +727,12 @@ def headline_rows(results: dict[str, Any], sources: Sequence[str]) -> list[list[
     proto = ((results.get("protocol") or {}).get("interaction") or {}).get("results", {})
     rel, phys, speed = results.get("relations", {}), results.get("physics", {}), results["speed"]
     rows = []
+    pairs = f"{results.get('meta', {}).get('split', 'test')} pairs"
     for key in ("fid", "r_precision_top3", "mm_dist", "diversity", "multimodality"):
         if proto:
             rows.append([PROTOCOL_KEYS[key]] + [fmt(*_pair(proto.get(s, {}).get(key)))
                                                 for s in sources])  # fmt: skip
-    for name, label in (("pairs", "test pairs"), ("groups", "groups of 3-6, zero-shot")):
+    for name, label in (("pairs", pairs), ("groups", "groups of 3-6, zero-shot")):
         if name in rel:
             rows.append([f"relation accuracy, {label} ↑"] + [
                 fmt(rel[name][s]["scene_accuracy"], rel[name][s]["scene_accuracy_ci"])
@@ -741,7 +745,7 @@ def headline_rows(results: dict[str, Any], sources: Sequence[str]) -> list[list[
                                                                  for s in sources])  # fmt: skip
     # the same scenes as a user's files hold them (separated, fitted, feet pinned)
     delivered = [delivered_name(s) for s in sources]
-    for name, label in (("pairs", "test pairs"), ("groups", "groups of 3-6")):
+    for name, label in (("pairs", pairs), ("groups", "groups of 3-6")):
         if any(d in rel.get(name, {}) for d in delivered):
             rows.append([f"relation accuracy, {label}, delivered ↑"] + [
                 fmt(rel[name][d]["scene_accuracy"], rel[name][d]["scene_accuracy_ci"])
