@@ -109,6 +109,7 @@ def test_quick_eval_end_to_end(setup):
     assert "umf eval --checkpoint" in text and "--quick" in text
     assert "groups of 8 instead of 96" in text and "![examples](examples.png)" in text
     assert "inter-person penetration (cm) ↓, groups, delivered" in text
+    assert set(m["motion"]) == {"tiny", "tiny, delivered", "reaction-only"}
     assert "split" not in m["meta"] or m["meta"]["split"] == "test"
 
 
