@@ -241,6 +241,11 @@ def test_delivered_joints_redo_the_default_call(trained):
     assert got.shape == full.joints.shape == (4, 45, 22, 3)
     assert np.allclose(got, full.joints, atol=1e-4)
     assert np.abs(got - raw.raw_joints).max() > 1e-3  # the clean-up changed something
+    kept = pipe("four people dance in a circle", num_people=4, seconds=1.5, seed=2,
+                anchor=False)[0]  # fmt: skip
+    assert np.allclose(delivered_joints(raw.raw_joints, raw.features[..., CONTACT], anchor=False),
+                       kept.joints, atol=1e-4)  # fmt: skip
+    assert not np.allclose(kept.joints, full.joints, atol=1e-3)
     one = pipe("a person waves", num_people=1, seconds=1.0, seed=0)[0]  # fitted, not separated
     bare = pipe("a person waves", num_people=1, seconds=1.0, seed=0, fit=False)[0]
     assert np.allclose(delivered_joints(bare.raw_joints, bare.features[..., CONTACT]),
@@ -253,6 +258,29 @@ def _umf(*args: str):
 
     return subprocess.run([sys.executable, "-m", "umf.cli.main", *args],
                           capture_output=True, text=True)  # fmt: skip
+
+
+def test_generate_cli_no_anchor_keeps_the_decoded_path(trained, tmp_path):
+    """--no-anchor writes what pipe(..., anchor=False) makes; the default anchors feet."""
+    from typer.testing import CliRunner
+
+    from umf.cli.main import app
+
+    _, model, _ = trained
+    got = {}
+    for flag in ("--anchor", "--no-anchor"):
+        out = tmp_path / flag
+        r = CliRunner().invoke(app, ["generate", "two people bow", "--people", "2", "--seconds",
+                                     "1", "--format", "npz", "--out", str(out), "--model",
+                                     str(model), "--seed", "4", flag])  # fmt: skip
+        assert r.exit_code == 0, r.output
+        with np.load(out / "00-two-people-bow.npz") as z:
+            got[flag] = z["joints"]
+    pipe = UMFPipeline.from_pretrained(model)
+    for flag, anchor in (("--anchor", True), ("--no-anchor", False)):
+        want = pipe("two people bow", num_people=2, seconds=1.0, seed=4, anchor=anchor)[0]
+        assert np.allclose(got[flag], want.joints, atol=1e-5), flag
+    assert not np.allclose(got["--anchor"], got["--no-anchor"], atol=1e-3)
 
 
 def test_react_cli_with_a_bvh_actor(trained, tmp_path):

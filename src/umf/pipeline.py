@@ -186,6 +186,7 @@ class UMFPipeline:
         separate: bool = True,
         sample_indices: Sequence[int] | None = None,
         fit: bool = True,
+        anchor: bool = True,
     ) -> list[Scene]:
         """Generate one scene per prompt (batched).
 
@@ -225,7 +226,7 @@ class UMFPipeline:
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
             indices = [req.sample_indices[i] for i in part]
-            scenes += self._sample(texts, indices, req, seed, actor, separate, fit)
+            scenes += self._sample(texts, indices, req, seed, actor, separate, fit and anchor, fit)
         return scenes
 
     def _sample(
@@ -236,7 +237,8 @@ class UMFPipeline:
         seed: int,
         actor: np.ndarray | None,
         separate: bool,
-        fit: bool = True,
+        anchor: bool,
+        fit: bool,
     ) -> list[Scene]:
         """One chunk of scenes, each drawing its noise from its own stream."""
         num_people, guidance = req.num_people, req.guidance
@@ -289,9 +291,9 @@ class UMFPipeline:
         floor = 0.0 if frame is None else float(frame.origin[1])
         clean = [frame is None or k > 0 for k in range(num_people)]  # not the actor
         contacts = feats[..., CONTACT].numpy()
-        decoded = features_to_joints(feats).numpy()
+        decoded = features_to_joints(feats).numpy().copy()  # not a view: feats shift below
         # what the fit starts from: generated people's planted feet anchored (umf.anchoring)
-        start = [anchor_people(decoded[i], contacts[i], floor, clean) if fit else decoded[i]
+        start = [anchor_people(decoded[i], contacts[i], floor, clean) if anchor else decoded[i]
                  for i in range(b)]  # fmt: skip
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
         if separate and num_people > 1:
@@ -352,17 +354,22 @@ def default_model_dir() -> Path:
     return Path(__file__).parent / "assets" / "model"
 
 
-def delivered_joints(raw: np.ndarray, contacts: np.ndarray, floor: float = 0.0) -> np.ndarray:
+def delivered_joints(
+    raw: np.ndarray, contacts: np.ndarray, floor: float = 0.0, anchor: bool = True
+) -> np.ndarray:
     """A generated scene's joints as the default pipeline hands them out, from its raw
     decoded joints (N, T, 22, 3) and contact labels (N, T, 4): planted feet anchored
     (:mod:`umf.anchoring`), people 2..N separated (:mod:`umf.separation`), then everyone
     fitted as one rigid body with planted feet pinned and kept off the ``floor``
     (:mod:`umf.kinematics`).
 
-    The same steps as ``UMFPipeline.__call__(separate=True, fit=True)``, applied after the
-    fact, so evaluation can score a ``fit=False`` scene both raw and as users receive it.
+    The same steps as ``UMFPipeline.__call__(separate=True, fit=True, anchor=anchor)``,
+    applied after the fact, so evaluation can score a ``fit=False`` scene both raw and as
+    users receive it.
     """
-    joints = anchor_people(np.asarray(raw), np.asarray(contacts), floor)
+    joints = np.asarray(raw)
+    if anchor:
+        joints = anchor_people(joints, np.asarray(contacts), floor)
     if joints.shape[0] > 1:
         joints, _ = separate_people(joints)
     return fit_bodies(joints, contacts, floor, True).joints()

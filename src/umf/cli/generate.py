@@ -109,6 +109,10 @@ def generate(
     prompts: Path | None = typer.Option(None, help="Text file: one prompt per line."),
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
     out: Path = typer.Option(Path("out/generate"), help="Output directory."),
+    anchor: bool = typer.Option(
+        True,
+        help="Move a gliding body back so planted feet stay put (--no-anchor: the decoded path).",
+    ),
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
     view: bool = typer.Option(False, "--view", help="Then play the scenes in the 3-D page."),
     port: int = typer.Option(8000, help="Port of the --view page (0: any free port)."),
@@ -137,7 +141,7 @@ def generate(
     for part in chunks(len(jobs), chunk_size(req.num_people, frames)):
         scenes = pipe([jobs[i][1] for i in part], num_people=req.num_people, seconds=req.seconds,
                       seed=req.seed, guidance=req.guidance, pflow_steps=req.pflow_steps,
-                      sflow_steps=req.sflow_steps,
+                      sflow_steps=req.sflow_steps, anchor=anchor,
                       sample_indices=[jobs[i][2] for i in part])  # fmt: skip
         for i, scene in zip(part, scenes, strict=True):
             for path in write_scene(scene, stems[i], wanted):
@@ -164,6 +168,10 @@ def react(
     batch: int = typer.Option(1, "--batch", "-b", help="Scenes to sample around the actor."),
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
     out: Path = typer.Option(Path("out/react"), help="Output directory."),
+    anchor: bool = typer.Option(
+        True,
+        help="Move a gliding body back so planted feet stay put (--no-anchor: the decoded path).",
+    ),
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
 ) -> None:
     """Your own motion as person 1; the model generates the others around it."""
@@ -210,7 +218,7 @@ def react(
     for part in chunks(batch, chunk_size(req.num_people, joints.shape[0])):
         scenes = pipe([prompt] * len(part), num_people=req.num_people, seed=req.seed,
                       guidance=req.guidance, sflow_steps=req.sflow_steps, actor=joints,
-                      sample_indices=list(part))  # fmt: skip
+                      anchor=anchor, sample_indices=list(part))  # fmt: skip
         for j, scene in zip(part, scenes, strict=True):
             for path in write_scene(scene, stems[j], wanted):
                 typer.echo(f"wrote {path}")
