@@ -4,7 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from umf.separation import MIN_DISTANCE, closest_approach, separate_people
+from umf.data.relations import CONTACT_DISTANCE, min_interperson_distance
+from umf.separation import FIT_MARGIN, MIN_DISTANCE, closest_approach, separate_people
 
 
 def _pelvis_gaps(joints: np.ndarray) -> list[float]:
@@ -17,6 +18,7 @@ def test_overlapping_people_are_pushed_apart_rigidly(real_joints):
     scene = np.stack([walk, walk, walk + np.array([0.1, 0.0, 0.0]), walk])  # 3 on top of 1
     out, shifts = separate_people(scene)
     assert min(_pelvis_gaps(out)) >= MIN_DISTANCE - 1e-6
+    assert min_interperson_distance(out)[0] >= CONTACT_DISTANCE - 1e-6  # no joint touches
     assert np.allclose(shifts[0], 0.0)  # person 1 never moves
     assert np.allclose(shifts[:, 1], 0.0)  # nobody is lifted
     for k in range(4):  # each motion is its own up to one translation
@@ -31,10 +33,36 @@ def test_people_already_apart_do_not_move(real_joints):
 
 
 def test_shift_is_minimal_for_two_people(real_joints):
+    """Pelvises 0.3 m apart: pushed sideways, along the line between them, until both rules
+    hold (joints: the contact distance plus the fit's margin), and 2 cm less (a push goes
+    STEP_MARGIN = 1 cm beyond what is missing) would break one: the swinging hands come
+    closest, not the pelvises."""
     walk = real_joints.numpy()[:60]
     scene = np.stack([walk, walk + np.array([0.3, 0.0, 0.0])])  # 0.3 m apart all along
-    _, shifts = separate_people(scene)
-    assert np.allclose(shifts[1], [MIN_DISTANCE - 0.3 + 1e-3, 0.0, 0.0], atol=1e-5)
+    out, shifts = separate_people(scene)
+    assert np.allclose(shifts[1, 1:], 0.0, atol=1e-9) and shifts[1, 0] > MIN_DISTANCE - 0.3
+    apart = CONTACT_DISTANCE + FIT_MARGIN
+    assert min(_pelvis_gaps(out)) >= MIN_DISTANCE - 1e-6
+    assert min_interperson_distance(out)[0] >= apart - 1e-6
+    less = out.copy()
+    less[1, ..., 0] -= 0.02
+    assert min(_pelvis_gaps(less)) < MIN_DISTANCE or min_interperson_distance(less)[0] < apart
+
+
+def test_reaching_arms_are_kept_out_of_a_neighbour(bandai_clips):
+    """Pelvises far enough apart, but a raised arm of one passes 10 cm from the other's
+    head: the second person is moved until no two joints are within the contact distance."""
+    wave = next(c for c in bandai_clips if c.id == "dataset-2_wave-right-hand_normal_001")
+    body = wave.joints[0][:90].astype(np.float64)
+    body -= body[:1, :1] * np.array([1.0, 0.0, 1.0])  # start at the origin
+    near = body + np.array([0.6, 0.0, 0.0])
+    scene = np.stack([body, near])
+    assert min(_pelvis_gaps(scene)) > MIN_DISTANCE  # the old rule alone would not move it
+    assert min_interperson_distance(scene)[0] < CONTACT_DISTANCE
+    out, shifts = separate_people(scene)
+    assert min_interperson_distance(out)[0] >= CONTACT_DISTANCE - 1e-6
+    assert np.linalg.norm(shifts[1]) > 0 and not shifts[0].any()
+    assert np.allclose(out[1] - scene[1], shifts[1])
 
 
 def test_a_crowd_always_ends_apart():

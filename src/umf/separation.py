@@ -3,17 +3,25 @@
 S-Flow is trained on two-person scenes; asked for a third or fourth person it can place
 several reactions on top of each other (they share the same context). An animator wants
 bodies that do not overlap, so the pipeline, by default, moves each person k >= 2 as a
-whole along the floor, as little as needed, until their pelvis path keeps ``min_distance``
-from everyone before them at every frame. Person 1 never moves (in ``react`` mode it is
-the user's own motion), and each person's motion is unchanged up to that one translation.
-Evaluation turns it off (``separate=False``) to score the model's own output.
+whole along the floor, as little as needed, until at every frame their pelvis keeps
+``min_distance`` from everyone before them (on the floor) and none of their joints comes
+within ``contact_distance`` of another person's joint: the training scenes' own rule (the
+composer keeps people 25 cm apart), so hands and elbows do not pass through a neighbour.
+Person 1 never moves (in ``react`` mode it is the user's own motion), and each person's
+motion is unchanged up to that one translation. Evaluation turns it off
+(``separate=False``) to score the model's own output.
 """
 
 from __future__ import annotations
 
 import numpy as np
 
+from umf.data.relations import CONTACT_DISTANCE
+
 MIN_DISTANCE = 0.5  # metres between two pelvises on the floor: shoulder to shoulder
+STEP_MARGIN = 0.01  # m pushed beyond what is missing: fewer rounds when the worst pair changes
+FIT_MARGIN = 0.03  # m added to the contact distance: the kinematic fit that follows moves
+# joints by up to a few centimetres (umf.kinematics), and they must still not touch
 
 
 def closest_approach(a: np.ndarray, b: np.ndarray) -> tuple[float, int]:
@@ -23,48 +31,100 @@ def closest_approach(a: np.ndarray, b: np.ndarray) -> tuple[float, int]:
     return float(d[t]), t
 
 
+def closest_joints(
+    a: np.ndarray, b: np.ndarray, within: float = np.inf
+) -> tuple[float, int, np.ndarray]:
+    """Smallest 3-D distance between any joint of body a and any of body b (T, 22, 3), its
+    frame, and the floor direction (2,) from b's joint to a's there.
+
+    Only frames where the two bodies could come ``within`` that distance are searched (at
+    a frame, no two joints are closer than the pelvises' distance minus both bodies' reach
+    from their pelvis); when none could, the smallest such bound is returned instead (it
+    is at least ``within``), with the pelvis-to-pelvis direction.
+    """
+    reach_a = np.linalg.norm(a - a[:, :1], axis=-1).max(-1)
+    reach_b = np.linalg.norm(b - b[:, :1], axis=-1).max(-1)
+    bound = np.linalg.norm(a[:, 0] - b[:, 0], axis=-1) - reach_a - reach_b  # (T,)
+    frames = np.flatnonzero(~(bound >= within))  # NaN frames are searched (and stay NaN)
+    if len(frames) == 0:
+        t = int(np.argmin(bound))
+        return float(bound[t]), t, (a[t, 0] - b[t, 0])[[0, 2]]
+    diff = a[frames, :, None, :] - b[frames, None, :, :]  # (F, 22, 22, 3)
+    dist = np.sqrt((diff**2).sum(-1))
+    f, i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
+    return float(dist[f, i, j]), int(frames[f]), diff[f, i, j, [0, 2]]
+
+
+def _deficit(
+    k: int,
+    j: int,
+    pelvis: np.ndarray,
+    bodies: np.ndarray | None,
+    shifts: np.ndarray,
+    min_distance: float,
+    contact_distance: float,
+) -> tuple[float, np.ndarray]:
+    """How far person k must still move away from person j, and which way on the floor:
+    along the line between their pelvises at the frame where they are closest (between the
+    two touching joints when the pelvises coincide)."""
+    path, other = pelvis[k] + shifts[k], pelvis[j] + shifts[j]
+    d, t = closest_approach(path, other)
+    worst, way = min_distance - d, path[t] - other[t]
+    if bodies is not None:
+        lift = np.zeros(3)
+        lift[[0, 2]] = shifts[k] - shifts[j]
+        d, t, joint_way = closest_joints(bodies[k] + lift, bodies[j], contact_distance)
+        if contact_distance - d > worst:
+            worst, way = contact_distance - d, path[t] - other[t]
+            way = way if np.linalg.norm(way) > 1e-6 else joint_way
+    return worst, way
+
+
 def separation_shifts(
-    pelvis: np.ndarray, min_distance: float = MIN_DISTANCE, max_rounds: int = 50
+    pelvis: np.ndarray,
+    min_distance: float = MIN_DISTANCE,
+    max_rounds: int = 10,
+    bodies: np.ndarray | None = None,
+    contact_distance: float = CONTACT_DISTANCE,
 ) -> np.ndarray:
-    """Floor offsets (N, 2) that keep pelvis paths (N, T, 2) ``min_distance`` apart.
+    """Floor offsets (N, 2) that keep pelvis paths (N, T, 2) ``min_distance`` apart and,
+    given ``bodies`` (N, T, 22, 3), every two people's joints ``contact_distance`` apart.
 
     People are placed in order (as Algorithm 1 generates them); person k is pushed away
-    from the earlier person it comes closest to, along the line between them at that
-    frame, until it clears all of them. Coincident paths are split along a fixed,
+    from every earlier person it is too close to at once (each push along the line between
+    the two pelvises at the frame where they are closest, as far as is missing plus
+    ``STEP_MARGIN``), until it clears all of them. Coincident paths are split along a fixed,
     person-dependent direction so the result is deterministic.
     """
     n = pelvis.shape[0]
     shifts = np.zeros((n, 2))
+
+    def push_of(k: int) -> np.ndarray | None:
+        """Sum over everyone k is too close to of (how far) x (which way); None: clear."""
+        total, any_ = np.zeros(2), False
+        for j in range(k):
+            need, way = _deficit(k, j, pelvis, bodies, shifts, min_distance, contact_distance)
+            if need > 0:
+                any_ = True
+                if np.linalg.norm(way) < 1e-6:
+                    angle = 2.0 * np.pi * k / (n + 1)
+                    way = np.array([np.cos(angle), np.sin(angle)])
+                total += way / np.linalg.norm(way) * (need + STEP_MARGIN)
+        return total if any_ else None
+
     for k in range(1, n):
         for _ in range(max_rounds):
-            path = pelvis[k] + shifts[k]
-            worst = None
-            for j in range(k):
-                d, t = closest_approach(path, pelvis[j] + shifts[j])
-                if d < min_distance and (worst is None or d < worst[0]):
-                    worst = (d, t, j)
-            if worst is None:
+            push = push_of(k)
+            if push is None or np.linalg.norm(push) < 1e-6:  # clear, or pushes cancel out
                 break
-            d, t, j = worst
-            away = path[t] - (pelvis[j, t] + shifts[j])
-            if d < 1e-6:
-                angle = 2.0 * np.pi * k / (n + 1)
-                away = np.array([np.cos(angle), np.sin(angle)])
-            shifts[k] += away / max(np.linalg.norm(away), 1e-9) * (min_distance - d + 1e-3)
-        _walk_out(pelvis, shifts, k, min_distance)
+            shifts[k] += push
+        _walk_out(pelvis, shifts, k, min_distance, lambda k=k: push_of(k) is None)
     return shifts
 
 
-def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: float) -> None:
+def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: float, clear) -> None:
     """Pushes between two neighbours can cycle in a crowd: then move person k straight away
     from the others' centre until it clears all of them (always ends: they are finite)."""
-
-    def clear() -> bool:
-        path = pelvis[k] + shifts[k]
-        return all(
-            closest_approach(path, pelvis[j] + shifts[j])[0] >= min_distance for j in range(k)
-        )
-
     if clear() or not np.isfinite(pelvis[: k + 1]).all():  # NaN never clears: leave it
         return
     centre = np.mean([(pelvis[j] + shifts[j]).mean(0) for j in range(k)], axis=0)
@@ -78,12 +138,15 @@ def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: floa
 
 
 def separate_people(
-    joints: np.ndarray, min_distance: float = MIN_DISTANCE
+    joints: np.ndarray,
+    min_distance: float = MIN_DISTANCE,
+    contact_distance: float = CONTACT_DISTANCE + FIT_MARGIN,
 ) -> tuple[np.ndarray, np.ndarray]:
     """Joints (N, T, 22, 3) with people k >= 2 shifted apart on the floor, and the (N, 3)
     shifts applied (zero rows for people who did not move)."""
-    pelvis = joints[:, :, 0, [0, 2]].astype(np.float64)
-    flat = separation_shifts(pelvis, min_distance)
+    bodies = joints.astype(np.float64)
+    flat = separation_shifts(bodies[:, :, 0, [0, 2]], min_distance, bodies=bodies,
+                             contact_distance=contact_distance)  # fmt: skip
     shifts = np.zeros((joints.shape[0], 3), dtype=joints.dtype)
     shifts[:, 0], shifts[:, 2] = flat[:, 0], flat[:, 1]
     return joints + shifts[:, None, None, :], shifts
