@@ -49,10 +49,11 @@ def closest_joints(
     if len(frames) == 0:
         t = int(np.argmin(bound))
         return float(bound[t]), t, (a[t, 0] - b[t, 0])[[0, 2]]
-    diff = a[frames, :, None, :] - b[frames, None, :, :]  # (F, 22, 22, 3)
-    dist = np.sqrt((diff**2).sum(-1))
-    f, i, j = np.unravel_index(int(np.argmin(dist)), dist.shape)
-    return float(dist[f, i, j]), int(frames[f]), diff[f, i, j, [0, 2]]
+    fa, fb = a[frames], b[frames]  # squared distances by |x|^2 + |y|^2 - 2 x.y: (F, 22, 22)
+    d2 = (fa**2).sum(-1)[:, :, None] + (fb**2).sum(-1)[:, None, :] - 2.0 * fa @ fb.swapaxes(1, 2)
+    f, i, j = np.unravel_index(int(np.argmin(d2)), d2.shape)
+    diff = fa[f, i] - fb[f, j]
+    return float(np.linalg.norm(diff)), int(frames[f]), diff[[0, 2]]
 
 
 def _deficit(
