@@ -84,3 +84,20 @@ def test_non_finite_paths_do_not_hang():
     from umf.separation import separation_shifts
 
     assert np.isfinite(separation_shifts(np.full((3, 5, 2), np.nan))).all()
+
+
+def test_bodies_alone_still_end_apart():
+    """With no pelvis rule (min_distance 0), bodies pressed together from both sides (the
+    pushes cancel) still end apart: the walk-out steps by the contact distance."""
+    from umf.separation import separation_shifts
+
+    bodies = np.zeros((3, 4, 22, 3))
+    bodies[..., 1] = np.linspace(0.0, 1.7, 22)  # a vertical pole of joints per person
+    bodies[0, ..., 0], bodies[1, ..., 0], bodies[2, ..., 0] = -0.25, 0.25, 0.0
+    shifts = separation_shifts(bodies[:, :, 0, [0, 2]], 0.0, bodies=bodies,
+                               contact_distance=0.28)  # fmt: skip
+    placed = bodies + np.stack([shifts[:, 0], np.zeros(3), shifts[:, 1]], -1)[:, None, None]
+    for k in range(1, 3):
+        for j in range(k):
+            d = np.linalg.norm(placed[k][:, :, None] - placed[j][:, None], axis=-1).min()
+            assert d >= 0.28 - 1e-6, (k, j, d)

@@ -204,16 +204,23 @@ class UMFPipeline:
         in the user's own coordinates.
 
         ``separate`` (default) shifts people 2..N rigidly on the floor where their pelvis
-        paths come closer than 0.5 m to someone generated before them
-        (:mod:`umf.separation`); the motions themselves are untouched and the shifts are
-        in ``scene.meta["shifts"]``. Evaluation turns it off to score the raw model.
+        paths come closer than 0.5 m to someone generated before them, or any of their
+        joints within 28 cm of another person's (:mod:`umf.separation`); the motions
+        themselves are untouched and the shifts are in ``scene.meta["shifts"]``.
+        Evaluation turns it off to score the raw model.
 
         ``fit`` (default) makes each person one rigid body (:mod:`umf.kinematics`, once per
         scene): ``scene.joints`` is its forward kinematics, what every export writes, with
         planted feet pinned and everyone kept off the floor (the actor of a reaction is
-        only fitted); the decoded positions stay in ``scene.raw_joints``. ``fit=False``
+        only fitted). ``anchor`` (default; only with ``fit``) first moves each generated
+        person back along the floor by the slide of a planted foot (:mod:`umf.anchoring`):
+        a body the decoder glides along with its feet planted travels only as far as its
+        legs carry it; ``anchor=False`` keeps the decoded floor path (feet may skate). The
+        separation is decided on the anchored paths. The decoded positions (moved by the
+        separation's shifts, not anchored) stay in ``scene.raw_joints``. ``fit=False``
         (evaluation: no inverse kinematics for thousands of scenes) returns the decoded
-        positions as ``joints``; such a scene's files fit a copy when written.
+        positions as ``joints``, neither anchored nor fitted; such a scene's files fit a
+        copy when written.
         """
         req = check_request(prompts, num_people, seconds, seed, guidance, pflow_steps,
                             sflow_steps, sample_indices)  # fmt: skip

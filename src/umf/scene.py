@@ -43,7 +43,9 @@ class Scene:
         fps: frames per second.
         seed, model: what generated it ("" / None for files).
         meta: free-form (sampling settings, shifts, the floor height, the source file ...).
-        raw_joints: (N, T, 22, 3) the positions the bodies were fitted to.
+        raw_joints: (N, T, 22, 3) the decoded positions (after the separation's rigid
+            shifts); the bodies were fitted to them once planted feet were anchored
+            (:mod:`umf.anchoring`, a floor translation per frame).
         bodies: the rigid skeletons; None only for ``fit=False`` scenes (evaluation),
             whose ``joints`` are then the raw positions and whose exports fit a copy.
     """

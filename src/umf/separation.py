@@ -119,11 +119,12 @@ def separation_shifts(
             if push is None or np.linalg.norm(push) < 1e-6:  # clear, or pushes cancel out
                 break
             shifts[k] += push
-        _walk_out(pelvis, shifts, k, min_distance, lambda k=k: push_of(k) is None)
+        step = max(min_distance, contact_distance if bodies is not None else 0.0, 0.04) / 4
+        _walk_out(pelvis, shifts, k, step, lambda k=k: push_of(k) is None)
     return shifts
 
 
-def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: float, clear) -> None:
+def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, step: float, clear) -> None:
     """Pushes between two neighbours can cycle in a crowd: then move person k straight away
     from the others' centre until it clears all of them (always ends: they are finite)."""
     if clear() or not np.isfinite(pelvis[: k + 1]).all():  # NaN never clears: leave it
@@ -135,7 +136,7 @@ def _walk_out(pelvis: np.ndarray, shifts: np.ndarray, k: int, min_distance: floa
         away = np.array([np.cos(angle), np.sin(angle)])
     away = away / np.linalg.norm(away)
     while not clear():
-        shifts[k] += away * (min_distance / 4)
+        shifts[k] += away * step
 
 
 def separate_people(
