@@ -50,6 +50,12 @@ def skating(joints: np.ndarray, contacts: np.ndarray, fps: float) -> float:
     return float(speed[planted].mean()) if planted.any() else 0.0
 
 
+def speed(joints: np.ndarray, fps: float = 30.0) -> np.ndarray:
+    """Per person (N,), the pelvis's floor distance from first to last frame per second."""
+    span = np.linalg.norm(joints[:, -1, 0, [0, 2]] - joints[:, 0, 0, [0, 2]], axis=-1)
+    return span * fps / (joints.shape[1] - 1)
+
+
 def depth_cm(joints: np.ndarray, floor: float) -> tuple[float, float]:
     depth = np.clip(floor - joints[..., 1].min(-1), 0.0, None) * 100
     return float(depth.mean()), float(depth.max())
@@ -61,16 +67,17 @@ def main() -> None:
     args = ap.parse_args()
     torch.set_num_threads(1)
     pipe = UMFPipeline.from_pretrained(args.model)
-    rows = []
+    rows, travel = [], []
     for prompt, n in PROMPTS:
         t0 = time.perf_counter()
-        pipe(prompt, num_people=n, seconds=4.0, seed=0, fit=False)  # the same, no clean-up
+        pipe(prompt, num_people=n, seconds=4.0, seed=0, fit=False, separate=False)  # no clean-up
         t1 = time.perf_counter()
         s = pipe(prompt, num_people=n, seconds=4.0, seed=0)[0]  # what users get
         seconds = time.perf_counter() - t1 - (t1 - t0)
         raw, contacts, floor, out = s.raw_joints, s.features[..., CONTACT], 0.0, s.joints
         pose = np.linalg.norm((out - out[:, :, :1]) - (raw - raw[:, :, :1]), axis=-1)
         moved = np.linalg.norm((out - raw)[:, -1, 0, [0, 2]], axis=-1).max()
+        travel.append((prompt, [speed(x) for x in (raw, out)]))
         ratio = [np.mean([foot_skating(j, s.fps)["skate_ratio"] for j in x]) for x in (raw, out)]
         res = np.concatenate([mapping_residual(s.bodies, i).ravel() for i in range(n)])
         rows.append((prompt, n, spread_cm(raw).max(), spread_cm(out).max(),
@@ -94,6 +101,10 @@ def main() -> None:
         "mean | | {:.1f} / {:.4f} | {:.3f} / {:.3f} | {:.3f} / {:.3f} | {:.2f}/{:.2f} | "
         "{:.2f}/{:.2f} | {:.1f} / {:.1f} | {:.2f} | {:.1f} / {:.1f} | {:.2f}".format(*a.mean(0))
     )
+    print("\nprompt | travel m/s per person (start to end on the floor), decoded -> delivered")
+    for prompt, (before, after) in travel:
+        pairs = ", ".join(f"{x:.2f} -> {y:.2f}" for x, y in zip(before, after, strict=True))
+        print(f"{prompt[:40]} | {pairs}")
 
 
 if __name__ == "__main__":

@@ -46,14 +46,19 @@ def test_a_gliding_standing_person_stops(bandai_clips):
     assert before > 0.3 and after < 0.05
 
 
-def test_a_real_walk_keeps_its_path(bandai_clips, real_joints):
-    """Real planted feet barely slide: the correction keeps at least 90 % of a real walk's
-    distance and never moves the body more than a few centimetres off it."""
-    walk = real_joints.numpy()
+LOCOMOTION = ("dataset-1_walk_normal_001", "dataset-1_walk_normal_002", "dataset-1_walk_sad_001",
+              "dataset-2_run_normal_001", "dataset-2_walk-turn-left_active_001")  # fmt: skip
+
+
+@pytest.mark.parametrize("cid", LOCOMOTION)
+def test_real_walks_keep_their_path(bandai_clips, cid):
+    """Real planted feet barely slide: every walk and run of the sample keeps at least
+    93 % of its distance (the figure anchoring.py quotes), moved by at most a tenth of it."""
+    walk = _clip(bandai_clips, cid)
     fixed, shift = A.anchor_feet(walk, _contacts(walk))
     disp = np.linalg.norm(walk[-1, 0, [0, 2]] - walk[0, 0, [0, 2]])
     kept = np.linalg.norm(fixed[-1, 0, [0, 2]] - fixed[0, 0, [0, 2]]) / disp
-    assert disp > 1.0 and kept > 0.9
+    assert disp > 1.0 and 0.93 <= kept <= 1.0  # shorter, never longer: slides taken out
     assert np.abs(shift).max() < 0.1 * disp
 
 

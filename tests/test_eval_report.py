@@ -110,7 +110,7 @@ def test_quick_eval_end_to_end(setup):
     assert "groups of 8 instead of 96" in text and "![examples](examples.png)" in text
     assert "inter-person penetration (cm) ↓, groups, delivered" in text
     assert set(m["motion"]) == {"tiny", "tiny, delivered", "reaction-only"}
-    assert "split" not in m["meta"] or m["meta"]["split"] == "test"
+    assert m["meta"]["split"] == "test" and "single-person test clips" in text
 
 
 def test_val_split_chooses_without_the_test_set(setup):
@@ -128,7 +128,8 @@ def test_val_split_chooses_without_the_test_set(setup):
     assert "groups" not in m["relations"] and "groups" not in m["physics"]
     assert any("no val_groups scenes" in n for n in m["notes"])
     text = (out / "report.md").read_text()
-    assert "**val split**" in text and "--split val" in text
+    assert "**val split**" in text and "--split val" in text and "val pairs" in text
+    assert m["reconstruction"] and "single-person val clips" in text
     with pytest.raises(UMFError, match="--split"):
         R.make_plan(split="train")
 

@@ -4,8 +4,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from umf.data.relations import CONTACT_DISTANCE, min_interperson_distance
+from umf.data.relations import CONTACT_DISTANCE, closest_joints
 from umf.separation import FIT_MARGIN, MIN_DISTANCE, closest_approach, separate_people
+
+
+def min_interperson_distance(joints: np.ndarray) -> tuple[float]:
+    """Brute force, every joint pair of every two people at every frame (the oracle)."""
+    n = len(joints)
+    return (min(np.linalg.norm(joints[a][:, :, None] - joints[b][:, None], axis=-1).min()
+                for a in range(n) for b in range(a + 1, n)),)  # fmt: skip
 
 
 def _pelvis_gaps(joints: np.ndarray) -> list[float]:
@@ -101,3 +108,22 @@ def test_bodies_alone_still_end_apart():
         for j in range(k):
             d = np.linalg.norm(placed[k][:, :, None] - placed[j][:, None], axis=-1).min()
             assert d >= 0.28 - 1e-6, (k, j, d)
+
+
+def test_closest_joints_agrees_with_brute_force():
+    """The reach bound never skips a frame that holds the closest pair (random bodies,
+    1-5 frames, any ``within``), and the matmul distances pick the true pair."""
+    rng = np.random.default_rng(0)
+    for _ in range(300):
+        t = int(rng.integers(1, 6))
+        a = rng.normal(scale=0.3, size=(t, 22, 3)) + rng.normal(scale=1.0, size=3)
+        b = rng.normal(scale=0.3, size=(t, 22, 3)) + rng.normal(scale=1.0, size=3)
+        true = np.linalg.norm(a[:, :, None] - b[:, None], axis=-1)
+        within = float(rng.uniform(0.0, 2.0))
+        d, f, way = closest_joints(a, b, within)
+        if true.min() < within:  # searched: the exact minimum, its frame and direction
+            assert np.isclose(d, true.min()) and np.isclose(true[f].min(), true.min())
+            assert np.linalg.norm(way) <= d + 1e-9
+        else:  # not within: only said to be at least ``within`` (what the caller needs)
+            assert d >= within
+        assert np.isclose(closest_joints(a, b)[0], true.min())

@@ -199,6 +199,14 @@ def pin_targets(
     return path + disp, strength
 
 
+def planted_feet(joints: np.ndarray, contacts: np.ndarray, floor: float = 0.0) -> np.ndarray:
+    """(T, 4) bool, in contact slot order (l_ankle, l_foot, r_ankle, r_foot): the joint's
+    contact label is on and it is low enough to touch the ``floor`` (InterGen's contact
+    heights above it). One person's ``joints`` (T, 22, 3), ``contacts`` (T, 4)."""
+    heights = floor + np.array(CONTACT_HEIGHT_THRESHOLDS * 2)  # ankle, toe, ankle, toe
+    return (contacts > CONTACT_THRESHOLD) & (joints[:, list(FOOT_JOINTS), 1] < heights)
+
+
 def clean_targets(
     joints: np.ndarray, contacts: np.ndarray | None, floor: float | None
 ) -> tuple[np.ndarray, np.ndarray]:
@@ -213,11 +221,9 @@ def clean_targets(
     target = joints.astype(np.float64).copy()
     weight = np.ones(joints.shape[:2])
     if contacts is not None:
-        base = 0.0 if floor is None else floor
+        planted = planted_feet(joints, contacts, 0.0 if floor is None else floor)
         for slot, j in enumerate(FOOT_JOINTS):
-            low = joints[:, j, 1] < base + CONTACT_HEIGHT_THRESHOLDS[slot % 2]
-            planted = (contacts[:, slot] > CONTACT_THRESHOLD) & low
-            target[:, j], s = pin_targets(target[:, j], planted)
+            target[:, j], s = pin_targets(target[:, j], planted[:, slot])
             weight[:, j] += (PIN_WEIGHT - 1.0) * s
     if floor is not None:
         target[..., 1] = np.maximum(target[..., 1], floor)

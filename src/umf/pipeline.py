@@ -24,7 +24,7 @@ import torch
 from umf.anchoring import anchor_people
 from umf.config import UMFConfig
 from umf.errors import UMFError
-from umf.kinematics import fit_bodies
+from umf.kinematics import Bodies, fit_bodies
 from umf.representation import (
     CONTACT,
     Normalizer,
@@ -233,7 +233,7 @@ class UMFPipeline:
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
             indices = [req.sample_indices[i] for i in part]
-            scenes += self._sample(texts, indices, req, seed, actor, separate, fit and anchor, fit)
+            scenes += self._sample(texts, indices, req, seed, actor, separate, anchor, fit)
         return scenes
 
     def _sample(
@@ -299,26 +299,21 @@ class UMFPipeline:
         clean = [frame is None or k > 0 for k in range(num_people)]  # not the actor
         contacts = feats[..., CONTACT].numpy()
         decoded = features_to_joints(feats).numpy().copy()  # not a view: feats shift below
-        # what the fit starts from: generated people's planted feet anchored (umf.anchoring)
-        start = [anchor_people(decoded[i], contacts[i], floor, clean) if anchor else decoded[i]
-                 for i in range(b)]  # fmt: skip
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
-        if separate and num_people > 1:
-            for i in range(b):
-                _, shifts[i] = separate_people(start[i])
+        fitted = []
+        for i in range(b):
+            shifts[i], bodies = clean_up(decoded[i], contacts[i], floor, clean, anchor,
+                                         separate, fit)  # fmt: skip
+            fitted.append(bodies)
+        if shifts.any():  # the features move with the people (positions only)
             offset = torch.from_numpy(shifts).to(feats).repeat(1, 1, 22)  # (B, N, 66)
             feats[..., :66] = feats[..., :66] + offset[:, :, None, :]
-        joints = features_to_joints(feats)
+        joints = decoded + shifts[:, :, None, None, :]  # the decoded positions, separated
         check_finite(joints, "the generated joints")
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people, "floor": floor}
         scenes = []
         for i in range(b):
-            raw = joints[i].numpy()
-            f = feats[i].numpy()
-            bodies = None
-            if fit:
-                moved = start[i] + shifts[i][:, None, None, :]
-                bodies = fit_bodies(moved, contacts[i], floor, clean)
+            raw, f, bodies = joints[i], feats[i].numpy(), fitted[i]
             extra = {"shifts": shifts[i].tolist(), "sample_index": indices[i]}
             scenes.append(Scene(raw if bodies is None else bodies.joints(), f, prompts[i],
                                 self.config.fps, seed, self.name, {**meta, **extra}, raw,
@@ -361,22 +356,43 @@ def default_model_dir() -> Path:
     return Path(__file__).parent / "assets" / "model"
 
 
+def clean_up(
+    decoded: np.ndarray,
+    contacts: np.ndarray,
+    floor: float = 0.0,
+    clean: bool | list[bool] = True,
+    anchor: bool = True,
+    separate: bool = True,
+    fit: bool = True,
+) -> tuple[np.ndarray, Bodies | None]:
+    """What the pipeline does to one scene's decoded joints (N, T, 22, 3) with contact
+    labels (N, T, 4) before anything is written, in this order:
+
+    1. ``anchor`` (only with ``fit``): people with ``clean`` moved back by the slide of a
+       planted foot (:mod:`umf.anchoring`);
+    2. ``separate``: people 2..N shifted rigidly apart on the floor (:mod:`umf.separation`),
+       judged on the anchored paths;
+    3. ``fit``: one rigid body each, planted feet pinned and people with ``clean`` kept off
+       the ``floor`` (:mod:`umf.kinematics`).
+
+    Returns the (N, 3) separation shifts and the bodies (None without ``fit``).
+    """
+    start = anchor_people(decoded, contacts, floor, clean) if anchor and fit else decoded
+    shifts = np.zeros((decoded.shape[0], 3), dtype=np.float32)
+    if separate and decoded.shape[0] > 1:
+        _, shifts = separate_people(start)
+    if not fit:
+        return shifts, None
+    return shifts, fit_bodies(start + shifts[:, None, None, :], contacts, floor, clean)
+
+
 def delivered_joints(
     raw: np.ndarray, contacts: np.ndarray, floor: float = 0.0, anchor: bool = True
 ) -> np.ndarray:
     """A generated scene's joints as the default pipeline hands them out, from its raw
-    decoded joints (N, T, 22, 3) and contact labels (N, T, 4): planted feet anchored
-    (:mod:`umf.anchoring`), people 2..N separated (:mod:`umf.separation`), then everyone
-    fitted as one rigid body with planted feet pinned and kept off the ``floor``
-    (:mod:`umf.kinematics`).
-
-    The same steps as ``UMFPipeline.__call__(separate=True, fit=True, anchor=anchor)``,
-    applied after the fact, so evaluation can score a ``fit=False`` scene both raw and as
-    users receive it.
+    decoded joints (N, T, 22, 3) and contact labels (N, T, 4): :func:`clean_up` with
+    separation and the fit, so evaluation can score a ``fit=False`` scene both raw and as
+    users receive it (``pipe(..., anchor=anchor)``).
     """
-    joints = np.asarray(raw)
-    if anchor:
-        joints = anchor_people(joints, np.asarray(contacts), floor)
-    if joints.shape[0] > 1:
-        joints, _ = separate_people(joints)
-    return fit_bodies(joints, contacts, floor, True).joints()
+    _, bodies = clean_up(np.asarray(raw), np.asarray(contacts), floor, True, anchor)
+    return bodies.joints()

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from umf.data.relations import CONTACT_DISTANCE
+from umf.data.relations import CONTACT_DISTANCE, closest_joints
 
 MIN_DISTANCE = 0.5  # metres between two pelvises on the floor: shoulder to shoulder
 STEP_MARGIN = 0.01  # m pushed beyond what is missing: fewer rounds when the worst pair changes
@@ -29,31 +29,6 @@ def closest_approach(a: np.ndarray, b: np.ndarray) -> tuple[float, int]:
     d = np.linalg.norm(a - b, axis=-1)
     t = int(np.argmin(d))
     return float(d[t]), t
-
-
-def closest_joints(
-    a: np.ndarray, b: np.ndarray, within: float = np.inf
-) -> tuple[float, int, np.ndarray]:
-    """Smallest 3-D distance between any joint of body a and any of body b (T, 22, 3), its
-    frame, and the floor direction (2,) from b's joint to a's there.
-
-    Only frames where the two bodies could come ``within`` that distance are searched (at
-    a frame, no two joints are closer than the pelvises' distance minus both bodies' reach
-    from their pelvis); when none could, the smallest such bound is returned instead (it
-    is at least ``within``), with the pelvis-to-pelvis direction.
-    """
-    reach_a = np.linalg.norm(a - a[:, :1], axis=-1).max(-1)
-    reach_b = np.linalg.norm(b - b[:, :1], axis=-1).max(-1)
-    bound = np.linalg.norm(a[:, 0] - b[:, 0], axis=-1) - reach_a - reach_b  # (T,)
-    frames = np.flatnonzero(~(bound >= within))  # NaN frames are searched (and stay NaN)
-    if len(frames) == 0:
-        t = int(np.argmin(bound))
-        return float(bound[t]), t, (a[t, 0] - b[t, 0])[[0, 2]]
-    fa, fb = a[frames], b[frames]  # squared distances by |x|^2 + |y|^2 - 2 x.y: (F, 22, 22)
-    d2 = (fa**2).sum(-1)[:, :, None] + (fb**2).sum(-1)[:, None, :] - 2.0 * fa @ fb.swapaxes(1, 2)
-    f, i, j = np.unravel_index(int(np.argmin(d2)), d2.shape)
-    diff = fa[f, i] - fb[f, j]
-    return float(np.linalg.norm(diff)), int(frames[f]), diff[[0, 2]]
 
 
 def _deficit(

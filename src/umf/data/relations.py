@@ -71,17 +71,42 @@ def lateral_offset(joints: np.ndarray, a: int, b: int, frame: int = 0) -> tuple[
     return float(d @ left), float(d @ f)
 
 
+def closest_joints(
+    a: np.ndarray, b: np.ndarray, within: float = np.inf
+) -> tuple[float, int, np.ndarray]:
+    """Smallest 3-D distance between any joint of body a and any of body b (T, 22, 3), its
+    frame, and the floor direction (2,) from b's joint to a's there.
+
+    Only frames where the two bodies could come ``within`` that distance are searched (at
+    a frame, no two joints are closer than the pelvises' distance minus both bodies' reach
+    from their pelvis). The result is exact when the bodies do come within it; otherwise
+    it is only some value of at least ``within`` (the smallest bound, with the
+    pelvis-to-pelvis direction, when no frame was searched).
+    """
+    a, b = np.asarray(a, dtype=np.float64), np.asarray(b, dtype=np.float64)
+    reach_a = np.linalg.norm(a - a[:, :1], axis=-1).max(-1)
+    reach_b = np.linalg.norm(b - b[:, :1], axis=-1).max(-1)
+    bound = np.linalg.norm(a[:, 0] - b[:, 0], axis=-1) - reach_a - reach_b  # (T,)
+    frames = np.flatnonzero(~(bound >= within))  # NaN frames are searched (and stay NaN)
+    if len(frames) == 0:
+        t = int(np.argmin(bound))
+        return float(bound[t]), t, (a[t, 0] - b[t, 0])[[0, 2]]
+    fa, fb = a[frames], b[frames]  # squared distances by |x|^2 + |y|^2 - 2 x.y: (F, 22, 22)
+    d2 = (fa**2).sum(-1)[:, :, None] + (fb**2).sum(-1)[:, None, :] - 2.0 * fa @ fb.swapaxes(1, 2)
+    f, i, j = np.unravel_index(int(np.argmin(d2)), d2.shape)
+    diff = fa[f, i] - fb[f, j]
+    return float(np.linalg.norm(diff)), int(frames[f]), diff[[0, 2]]
+
+
 def min_interperson_distance(joints: np.ndarray) -> tuple[float, int, int, int]:
     """Smallest distance between any joints of two different people: (d, a, b, frame)."""
     best = (np.inf, -1, -1, -1)
     p = joints.shape[0]
     for a in range(p):
         for b in range(a + 1, p):
-            diff = joints[a][:, :, None, :] - joints[b][:, None, :, :]  # (T, 22, 22, 3)
-            d = np.sqrt((diff**2).sum(-1)).min(axis=(1, 2))
-            t = int(d.argmin())
-            if d[t] < best[0]:
-                best = (float(d[t]), a, b, t)
+            d, t, _ = closest_joints(joints[a], joints[b])
+            if d < best[0]:
+                best = (d, a, b, t)
     return best
 
 

@@ -504,18 +504,15 @@ def physics_summary(joints: Sequence[np.ndarray]) -> dict[str, Any]:
 
 @dataclass
 class SceneSet:
-    """Test records with their real joints and every contender's generated joints.
-
-    ``delivered`` holds the main model's same scenes as the default pipeline hands them
-    out (separated, fitted, feet pinned: :func:`umf.pipeline.delivered_joints`), under the
-    column name ``"<model>, delivered"``; ``generated`` is the raw model output.
+    """Test records with their real joints and every contender's generated joints: the raw
+    model output, and after them, under ``"<model>, delivered"``, the main model's same
+    scenes as the default pipeline hands them out (:func:`umf.pipeline.delivered_joints`).
     """
 
     name: str
     records: list[dict[str, Any]]
     real: list[np.ndarray]
     generated: dict[str, list[np.ndarray]] = field(default_factory=dict)
-    delivered: dict[str, list[np.ndarray]] = field(default_factory=dict)
 
 
 def delivered_name(model: str) -> str:
@@ -528,9 +525,8 @@ def scene_sets(
 ) -> list[SceneSet]:
     """Test pairs and zero-shot groups, real and generated (shared by sections 2, 3, 6)."""
     sets = []
-    groups = "test_groups" if plan.split == "test" else f"{plan.split}_groups"
     for name, split, limit in (("pairs", plan.split, plan.pair_scenes),
-                               ("groups", groups, plan.group_scenes)):  # fmt: skip
+                               ("groups", f"{plan.split}_groups", plan.group_scenes)):  # fmt: skip
         records = scene_records(corpus, split, limit)
         total = len(corpus.scenes.get(split, []))
         if not records:
@@ -544,6 +540,7 @@ def scene_sets(
             notes.append(f"{name}: {clipped} scenes are longer than the models' {longest} "
                          "frames; they are generated at that length.")  # fmt: skip
         s = SceneSet(name, records, real_scene_joints(corpus, records))
+        delivered = {}
         for c in contenders:
             log(f"relations/physics, {c.name}: generating {len(records)} {name}")
             if c.role != "model":
@@ -551,7 +548,8 @@ def scene_sets(
                 continue
             both = generate_records(c, records, plan.seed + 200_000, _joints_contacts)
             s.generated[c.name] = [j for j, _ in both]
-            s.delivered[delivered_name(c.name)] = [delivered_joints(j, k) for j, k in both]
+            delivered[delivered_name(c.name)] = [delivered_joints(j, k) for j, k in both]
+        s.generated |= delivered  # the delivered columns after every raw one
         sets.append(s)
     return sets
 
@@ -562,14 +560,11 @@ def relations_section(sets: Sequence[SceneSet]) -> dict[str, dict[str, Any]]:
     for s in sets:
         out[s.name] = {REAL: accuracy_summary(s.records, s.real)}
         out[s.name] |= {n: accuracy_summary(s.records, j) for n, j in s.generated.items()}
-        out[s.name] |= {n: accuracy_summary(s.records, j) for n, j in s.delivered.items()}
     if len(sets) > 1:
         recs = [r for s in sets for r in s.records]
         out["all"] = {REAL: accuracy_summary(recs, [j for s in sets for j in s.real])}
         for n in sets[0].generated:
             out["all"][n] = accuracy_summary(recs, [j for s in sets for j in s.generated[n]])
-        for n in sets[0].delivered:
-            out["all"][n] = accuracy_summary(recs, [j for s in sets for j in s.delivered[n]])
     return out
 
 
@@ -579,7 +574,6 @@ def physics_section(sets: Sequence[SceneSet]) -> dict[str, dict[str, Any]]:
     for s in sets:
         out[s.name] = {REAL: physics_summary(s.real)}
         out[s.name] |= {n: physics_summary(j) for n, j in s.generated.items()}
-        out[s.name] |= {n: physics_summary(j) for n, j in s.delivered.items()}
     return out
 
 
@@ -1000,7 +994,8 @@ def render_markdown(results: dict[str, Any]) -> str:
                 "(feet anchored, body fitted; section 3).", "",
                 motion_markdown(results["motion"])]  # fmt: skip
     if results.get("reconstruction"):
-        out += ["", "## 6. VAE reconstruction of the real single-person test clips", "",
+        split = meta.get("split", "test")
+        out += ["", f"## 6. VAE reconstruction of the real single-person {split} clips", "",
                 "Posterior means decoded; R² per feature group against the per-dimension "
                 "mean (1 perfect, 0 the mean pose; `umf.eval.reconstruction`).", "",
                 reconstruction_markdown(results["reconstruction"])]  # fmt: skip
