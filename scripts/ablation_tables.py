@@ -23,8 +23,10 @@ from typing import Any
 # Which stage each table retrains (its training time is reported), and what each variant is.
 TABLES = {
     "latent": ("Table 3: latent space (each row its own VAE and flows, one budget)", "all"),
-    "pyramid": ("Table 4: P-Flow pyramid and step allocation (each row's P-Flow retrained)",
-                "pflow"),
+    "pyramid": (
+        "Table 4: P-Flow pyramid and step allocation (each row's P-Flow retrained)",
+        "pflow",
+    ),
     "sflow": ("Table 5: S-Flow components (each row's S-Flow retrained)", "sflow"),
 }
 WHAT = {

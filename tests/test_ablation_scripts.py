@@ -37,7 +37,8 @@ def test_tables_are_rebuilt_from_the_reports(tmp_path):
     for title in ("Table 3", "Table 4", "Table 5"):
         assert f"## {title}" in text
     shared = fid_cell(RESULTS / "sflow" / "metrics.json", "shared-backbone")
-    assert f"| shared-backbone | S-Flow reuses (and fine-tunes) the P-Flow transformer | {shared} |" in text
+    what = "S-Flow reuses (and fine-tunes) the P-Flow transformer"
+    assert f"| shared-backbone | {what} | {shared} |" in text
     assert "0 (same weights)" in text  # step allocations reuse the trained model
     assert text.rstrip().endswith("hand-written text")
     assert (tmp_path / "ablations.png").stat().st_size > 10_000
