@@ -154,7 +154,8 @@ def rows_for(
 
 
 def plot(tables: dict[str, dict[str, Any]], path: Path) -> None:
-    """FID and R-precision top-3 (two people) per variant, one panel pair per table."""
+    """FID and R-precision top-3 per variant, one panel pair per table: one person for the
+    P-Flow table (its rows share the S-Flow, which dominates two-person scores), two else."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -162,9 +163,11 @@ def plot(tables: dict[str, dict[str, Any]], path: Path) -> None:
 
     fig, axes = plt.subplots(2, len(tables), figsize=(5 * len(tables), 6.5), squeeze=False)
     for j, (key, m) in enumerate(tables.items()):
-        res = m["protocol"]["interaction"]["results"]
+        one = key == "pyramid" and "single" in m["protocol"]
+        res = m["protocol"]["single" if one else "interaction"]["results"]
         names = [s["name"] for s in m["sources"][1:]]
-        panels = (("fid", "FID (two people) ↓"), ("r_precision_top3", "R-precision top-3 ↑"))
+        who = "one person" if one else "two people"
+        panels = (("fid", f"FID ({who}) ↓"), ("r_precision_top3", f"R-precision top-3 ({who}) ↑"))
         for i, (metric, label) in enumerate(panels):
             ax = axes[i][j]
             vals = [res[n][metric][0] for n in names]
