@@ -203,7 +203,8 @@ def main() -> None:
     from umf.eval.report import md_table
 
     parts = [
-        "# Ablations: the paper's Tables 3-5 on the Bandai corpus",
+        "# Ablations: the paper's " + ", ".join(TABLES[k][0].split(":")[0] for k in tables)
+        + " on the Bandai corpus",
         "",
         "Each table's rows, its first included, retrain only what they vary, all at one budget "
         "(`scripts/ablations.sh`), so rows compare with each other. "

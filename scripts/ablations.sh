@@ -12,7 +12,8 @@
 # (TABLES="3 4 5"; about 85 min of one CPU thread per row).
 #
 # Two training lanes run side by side, one thread each (on a 2-core CPU that beats one lane
-# of two threads); Tables 4-5 take about 1 h of training and 30 min of evaluation here.
+# of two threads), then the reports, also side by side on one thread each; Tables 4-5 take
+# about 1 h of training and 40 min of evaluation here.
 # Resumable: finished stages and written reports are skipped, killed stages resume.
 set -euo pipefail
 MODEL=${1:?usage: scripts/ablations.sh MODEL CORPUS [OUT]}
@@ -47,12 +48,11 @@ for stage in keep:
 cfg.save_yaml(run / "config.yaml")
 EOF
 }
-train() {  # STAGE NAME [--set ...]: skipped when finished, resumed when killed
+train() {  # STAGE NAME: on the run's config.yaml; skipped when finished, resumed when killed
   local stage=$1 dir=$WORK/$2 resume=()
-  shift 2
   [ -e "$dir/$stage/.done" ] && return
   [ -e "$dir/$stage/last" ] && resume=(--resume)
-  "$UMF" train "$stage" --corpus "$CORPUS" --out "$dir" --no-progress "${resume[@]}" "$@"
+  "$UMF" train "$stage" --corpus "$CORPUS" --out "$dir" --no-progress "${resume[@]}"
   touch "$dir/$stage/.done"
 }
 export_model() {  # NAME: the run's model directory, named for the variant in reports
@@ -65,14 +65,14 @@ flow_variant() {  # NAME STAGE [--set ...]: retrain STAGE (pflow or sflow), keep
   local name=$1 stage=$2
   shift 2
   if [ "$stage" = pflow ]; then prepare "$name" "vae sflow" "$@"; else prepare "$name" "vae pflow" "$@"; fi
-  train "$stage" "$name" "$@"
+  train "$stage" "$name"
   export_model "$name"
 }
 latent_variant() {  # NAME [--set ...]: a VAE and both flows
   local name=$1 stage
   shift
   prepare "$name" "" "$@"
-  for stage in vae pflow sflow; do train "$stage" "$name" "$@"; done
+  for stage in vae pflow sflow; do train "$stage" "$name"; done
   export_model "$name"
 }
 has() { [[ " $TABLES " == *" $1 "* ]]; }
@@ -109,16 +109,19 @@ wait $b
 
 EVAL=(--corpus "$CORPUS" --replications 3 --mm-prompts 8 --mm-samples 5 --length-step 15
   --no-progress)
-evaluate() {  # OUT_DIR MODEL [--variant ...]: one report, skipped when written
+evaluate() {  # OUT_DIR MODEL [--variant ...]: one report (one thread), skipped when written
   local out=$1 model=$2
   shift 2
   [ -e "$out/metrics.json" ] && return
-  "$UMF" eval --checkpoint "$model" --out "$out" "${EVAL[@]}" "$@"
+  OMP_NUM_THREADS=1 "$UMF" eval --checkpoint "$model" --out "$out" "${EVAL[@]}" "$@" \
+    > "$WORK/eval-$(basename "$out").log" 2>&1
 }
+reports=()  # the reports run side by side, like the training lanes
 if has 3; then
   evaluate "$OUT/latent" "$WORK/multi-token/model" \
     --variant "single-token=$WORK/single-token/model" \
-    --variant "no-latent-adapter=$WORK/no-latent-adapter/model"
+    --variant "no-latent-adapter=$WORK/no-latent-adapter/model" &
+  reports+=($!)
 fi
 if has 4; then
   P=$WORK/p-flow/model
@@ -126,13 +129,16 @@ if has 4; then
     --variant "steps-25-25=$P:pflow_steps=25,25" \
     --variant "steps-5-5=$P:pflow_steps=5,5" \
     --variant "no-pyramid=$WORK/no-pyramid/model" \
-    --variant "grid-pyramid=$WORK/grid-pyramid/model"
+    --variant "grid-pyramid=$WORK/grid-pyramid/model" &
+  reports+=($!)
 fi
 if has 5; then
   evaluate "$OUT/sflow" "$WORK/s-flow/model" \
     --variant "reaction-only=$WORK/reaction-only/model" \
     --variant "no-recon-loss=$WORK/no-recon-loss/model" \
     --variant "no-context-adapter=$WORK/no-context-adapter/model" \
-    --variant "shared-backbone=$WORK/shared-backbone/model"
+    --variant "shared-backbone=$WORK/shared-backbone/model" &
+  reports+=($!)
 fi
+for r in "${reports[@]}"; do wait "$r"; done
 "$PY" scripts/ablation_tables.py "$OUT" --time

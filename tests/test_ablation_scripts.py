@@ -34,6 +34,7 @@ def test_tables_are_rebuilt_from_the_reports(tmp_path):
                         str(tmp_path)], capture_output=True, text=True)  # fmt: skip
     assert r.returncode == 0, r.stderr
     text = (tmp_path / "README.md").read_text()
+    assert text.startswith("# Ablations: the paper's Table 3, Table 4, Table 5 on")
     for title in ("Table 3", "Table 4", "Table 5"):
         assert f"## {title}" in text
     shared = fid_cell(RESULTS / "sflow" / "metrics.json", "shared-backbone")
@@ -46,6 +47,7 @@ def test_tables_are_rebuilt_from_the_reports(tmp_path):
 
 def test_committed_tables_cover_the_current_recipe():
     committed = (RESULTS / "README.md").read_text()
+    assert committed.startswith("# Ablations: the paper's Table 4, Table 5 on")  # no stale 3
     for row in ("| p-flow |", "| steps-5-5 |", "| no-pyramid |", "| grid-pyramid |",
                 "| s-flow |", "| reaction-only |", "| no-recon-loss |",
                 "| no-context-adapter |", "| shared-backbone |"):  # fmt: skip
