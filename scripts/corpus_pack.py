@@ -8,6 +8,7 @@ LZMA (about 10x smaller than ``clips.npz``), and the text cache's features in fl
 the cache's ``encoder.json`` so training runs without the encoder installed.
 
     python scripts/corpus_pack.py pack out/corpus .gpu              # motion.npz, text.npz
+    python scripts/corpus_pack.py pack out/corpus .gpu coarse   # 2 mm, 1e-3 steps: 20 % smaller
     python scripts/corpus_pack.py unpack .gpu out/corpus            # on the other machine
     python scripts/corpus_pack.py check out/corpus out/unpacked     # largest differences
 """
@@ -57,7 +58,10 @@ def decode_tracks(blob: bytes, shape: tuple[int, ...], step: float, starts: np.n
     return (q * step).astype(np.float32).reshape(shape)
 
 
-def pack(corpus: Path, out: Path) -> None:
+def pack(
+    corpus: Path, out: Path, joint_step: float = JOINT_STEP, rot_step: float = ROT_STEP
+) -> None:
+    """The steps travel in the pack, so ``unpack`` reads any of them."""
     out.mkdir(parents=True, exist_ok=True)
     with np.load(corpus / "clips.npz") as z:
         joints, rot6d, index_s = z["joints"], z["rot6d"], str(z["index"])
@@ -65,8 +69,9 @@ def pack(corpus: Path, out: Path) -> None:
     files = {f: _z((corpus / f).read_bytes()) for f in CORPUS_FILES if (corpus / f).exists()}
     np.savez(
         out / "motion.npz",
-        joints=np.frombuffer(encode_tracks(joints, JOINT_STEP, starts), np.uint8),
-        rot6d=np.frombuffer(encode_tracks(rot6d, ROT_STEP, starts), np.uint8),
+        joints=np.frombuffer(encode_tracks(joints, joint_step, starts), np.uint8),
+        rot6d=np.frombuffer(encode_tracks(rot6d, rot_step, starts), np.uint8),
+        steps=np.asarray([joint_step, rot_step]),
         shapes=np.array(json.dumps({"joints": joints.shape, "rot6d": rot6d.shape})),
         index=_z(index_s.encode()),
         names=np.array(json.dumps(list(files))),
@@ -130,8 +135,9 @@ def _unpack_motion(packed: Path, corpus: Path) -> None:
         shapes = json.loads(str(z["shapes"]))
         index_s = _unz(z["index"]).decode()
         starts = _track_starts(json.loads(index_s))
-        joints = decode_tracks(z["joints"].tobytes(), tuple(shapes["joints"]), JOINT_STEP, starts)
-        rot6d = decode_tracks(z["rot6d"].tobytes(), tuple(shapes["rot6d"]), ROT_STEP, starts)
+        j_step, r_step = z["steps"] if "steps" in z.files else (JOINT_STEP, ROT_STEP)
+        joints = decode_tracks(z["joints"].tobytes(), tuple(shapes["joints"]), j_step, starts)
+        rot6d = decode_tracks(z["rot6d"].tobytes(), tuple(shapes["rot6d"]), r_step, starts)
         for i, name in enumerate(json.loads(str(z["names"]))):
             (corpus / name).write_bytes(_unz(z[f"file{i}"]))
     np.savez(corpus / "clips.npz", joints=joints, rot6d=rot6d, index=np.array(index_s))
@@ -165,4 +171,7 @@ def check(a: Path, b: Path) -> None:
 
 if __name__ == "__main__":
     cmd, src, dst = sys.argv[1:4]
-    {"pack": pack, "unpack": unpack, "check": check}[cmd](Path(src), Path(dst))
+    if cmd == "pack" and sys.argv[4:] == ["coarse"]:  # when the carry cap is tight
+        pack(Path(src), Path(dst), joint_step=2 * JOINT_STEP, rot_step=2 * ROT_STEP)
+    else:
+        {"pack": pack, "unpack": unpack, "check": check}[cmd](Path(src), Path(dst))

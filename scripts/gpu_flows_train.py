@@ -12,6 +12,11 @@ trains first, and the flows train on it.
     python scripts/gpu_flows_train.py 560 --vae --set vae.num_tokens=32 --set vae.token_span=5.0 \
         --set train_vae.max_steps=2000 --set train_vae.batch_size=128 ...
 
+Where what one call may carry is capped (the motion and the text features do not travel
+together), ``--vae-only`` trains the VAE in a first call (the motion only) and stops; the
+same command without it, in a second call on the same machine, finds that VAE finished
+(``RUNS``/flows/vae/finished) and trains the flows on it.
+
 The first argument is the wall-clock budget in seconds for everything: a flow still
 running then is stopped and the model is exported from the best checkpoints written so far
 (atomic, every ``ckpt_every`` steps); a VAE still running then ends the run (the flows need
@@ -54,7 +59,7 @@ def child(stage: str, run: Path, plan: Path) -> None:
     print(f"== {stage}: {time.time() - t0:.1f} s in all; {res}", flush=True)
 
 
-def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
+def parent(budget: float, overrides: list[str], new_vae: bool, vae_only: bool = False) -> None:
     from umf.config import UMFConfig, family_config, set_option
     from umf.train.run import check_run_config, export_model
 
@@ -73,7 +78,8 @@ def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
     run.mkdir(parents=True, exist_ok=True)
     cfg.save_yaml(run / "plan.yaml")
     OUT.mkdir(parents=True, exist_ok=True)
-    if new_vae:
+    finished = run / "vae" / "finished"  # written once a VAE child exits cleanly
+    if new_vae and not finished.exists():
         vae_cfg = set_option(cfg, f"train_vae.num_workers={os.environ.get('VAE_WORKERS', '12')}")
         (run / "vae-cfg").mkdir(exist_ok=True)
         vae_cfg.save_yaml(run / "vae-cfg" / "plan.yaml")
@@ -87,7 +93,14 @@ def parent(budget: float, overrides: list[str], new_vae: bool) -> None:
         if rc != 0:  # the flows need a finished VAE: a stopped or failed one ends the run
             raise SystemExit(f"VAE training stopped (exit {rc}, budget {budget:.0f} s); "
                              f"see {OUT / 'vae.log'}")  # fmt: skip
+        finished.touch()
         print(f"VAE done at {time.time() - t0:.0f} s", flush=True)
+    if vae_only:
+        for f in (run / "vae" / "best").iterdir():  # the VAE comes back even if the node goes
+            if f.suffix in (".json", ".safetensors"):  # not the optimiser state
+                shutil.copy(f, OUT / f"vae-best-{f.name}")
+        print(f"DONE (VAE only) {time.time() - t0:.0f} s", flush=True)
+        return
     procs = {}
     for stage, workers in (("pflow", "PFLOW_WORKERS"), ("sflow", "SFLOW_WORKERS")):
         w = os.environ.get(workers, "8")
@@ -144,4 +157,5 @@ if __name__ == "__main__":
     else:
         args = sys.argv[2:]
         sets = [args[i + 1] for i in range(len(args) - 1) if args[i] == "--set"]
-        parent(float(sys.argv[1]), sets, new_vae="--vae" in args)
+        parent(float(sys.argv[1]), sets, new_vae="--vae" in args or "--vae-only" in args,
+               vae_only="--vae-only" in args)  # fmt: skip

@@ -36,3 +36,19 @@ def test_pack_unpack_round_trip(tmp_path):
     assert (src / "normalizer.safetensors").read_bytes() == (
         tmp_path / "unpacked" / "normalizer.safetensors"
     ).read_bytes()
+
+
+def test_coarse_steps_travel_in_the_pack(tmp_path):
+    """A pack made with coarser steps unpacks with them (not the module's defaults)."""
+    cp = _load_script()
+    src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=3, val_scenes=1,
+                                 test_scenes=1, test_groups=1)  # fmt: skip
+    js, rs = 4 * cp.JOINT_STEP, 4 * cp.ROT_STEP
+    cp.pack(src, tmp_path / "packed", joint_step=js, rot_step=rs)
+    cp.unpack(tmp_path / "packed", tmp_path / "unpacked")
+    a, b = Corpus.load(src), Corpus.load(tmp_path / "unpacked")
+    pairs = list(zip(a.clips, b.clips, strict=True))
+    err_j = max(np.abs(ca.joints - cb.joints).max() for ca, cb in pairs)
+    err_r = max(np.abs(ca.rot6d - cb.rot6d).max() for ca, cb in pairs)
+    assert err_j <= js / 2 + 1e-6 and err_r <= rs / 2 + 1e-6
+    assert err_j > cp.JOINT_STEP / 2  # decoded at the pack's step, not the default's

@@ -1,0 +1,41 @@
+#!/usr/bin/env bash
+# The 32-token model on one lent GPU, in two calls of the device tool (what one call may
+# carry is capped: the motion pack and the text features travel apart), on the same warm
+# machine:
+#   call 1 (carry .gpu/pack):  scripts/gpu_train_t32.sh vae   BUDGET_S   # unpack motion, train the VAE
+#   call 2 (carry .gpu/text):  scripts/gpu_train_t32.sh flows BUDGET_S   # unpack text, train both flows
+# Both calls pass the same options, so the flows load the VAE they were planned with.
+# Packs: python scripts/corpus_pack.py pack out/corpus .gpu/pack coarse (then text.npz to .gpu/text).
+set -euo pipefail
+phase=$1 budget=$2
+export PYTHONPATH=$PWD/src PYTHONUNBUFFERED=1 RUNS=${RUNS:-$PWD/out/runs} CORPUS=${CORPUS:-out/corpus}
+OPTS=(
+  --set vae.num_tokens=32 --set vae.token_span=5.0
+  --set train_vae.max_steps=2000 --set train_vae.batch_size=128 --set train_vae.warmup_steps=300
+  --set train_vae.val_every=1000 --set train_vae.ckpt_every=1000 --set train_vae.log_every=25
+  --set pflow.guidance=2.0 --set sflow.guidance=2.0
+  --set train_pflow.max_steps=${FLOW_STEPS:-5000} --set train_sflow.max_steps=${FLOW_STEPS:-5000}
+  --set train_pflow.batch_size=512 --set train_sflow.batch_size=512
+  --set train_pflow.lr=0.0004 --set train_sflow.lr=0.0004
+  --set train_pflow.warmup_steps=300 --set train_sflow.warmup_steps=300
+  --set train_pflow.ema_decay=0.999 --set train_sflow.ema_decay=0.999
+  --set train_pflow.latent_passes=6 --set train_sflow.latent_passes=8
+  --set train_pflow.val_every=400 --set train_sflow.val_every=400
+  --set train_pflow.ckpt_every=400 --set train_sflow.ckpt_every=400
+)
+OPTS+=(${EXTRA:-})  # dry runs: fewer steps
+case $phase in
+  vae)
+    python scripts/corpus_pack.py unpack .gpu/pack "$CORPUS"
+    VAE_WORKERS=${VAE_WORKERS:-12} python scripts/gpu_flows_train.py "$budget" --vae-only "${OPTS[@]}" ;;
+  flows)
+    python scripts/corpus_pack.py unpack .gpu/text "$CORPUS"
+    rc=0
+    PFLOW_WORKERS=${PFLOW_WORKERS:-9} SFLOW_WORKERS=${SFLOW_WORKERS:-5} \
+      python scripts/gpu_flows_train.py "$budget" --vae "${OPTS[@]}" || rc=$?
+    # at most 8 files come back: the model's six, and one archive of logs and metrics
+    cd "$OUT" && tar czf training.tgz --remove-files ./*.log ./*-metrics.csv plan.yaml
+    rm -f best-*.safetensors
+    exit $rc ;;
+  *) echo "usage: $0 vae|flows BUDGET_S" >&2; exit 2 ;;
+esac
