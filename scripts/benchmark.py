@@ -68,9 +68,10 @@ def main() -> None:
     pipe = UMFPipeline.from_pretrained(args.model)
     load_s = time.perf_counter() - start
     steps = list(pipe.config.pflow.steps)
-    sflow_steps = pipe.config.sflow.steps
+    sflow_steps, pair_steps = pipe.config.sflow.steps, pipe.config.sflow.steps_for(2)
     print(f"model {pipe.name}: loaded in {load_s:.2f} s; steps P-Flow {steps}, "
-          f"S-Flow {sflow_steps} per person; torch {torch.__version__}, "
+          f"S-Flow {sflow_steps} per person ({pair_steps} for two people); "
+          f"torch {torch.__version__}, "
           f"{torch.get_num_threads()} threads")  # fmt: skip
 
     per_scene = {}
@@ -107,6 +108,7 @@ def main() -> None:
         "load_s": round(load_s, 3),
         "pflow_steps": steps,
         "sflow_steps": sflow_steps,
+        "sflow_pair_steps": pair_steps,
         "s_per_scene": {str(k): round(v, 4) for k, v in per_scene.items()},
         "batch16_scenes_per_s": round(batch / s16, 2),
         "pflow_pyramid_s": round(pyr, 5),

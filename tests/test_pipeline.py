@@ -2,6 +2,10 @@
 
 from __future__ import annotations
 
+import json
+import shutil
+from pathlib import Path
+
 import numpy as np
 import pytest
 import torch
@@ -360,3 +364,19 @@ def test_missing_or_corrupt_model_from_the_cli(trained, tmp_path):
     r = _umf("generate", "x", "--model", str(bad), "--out", str(tmp_path / "o"))
     assert r.returncode == 1 and len(r.stderr.strip().splitlines()) == 1, r.stderr
     assert not (tmp_path / "o").exists()
+
+
+def test_pair_steps_apply_to_two_people_only(trained, tmp_path):
+    """A model's ``sflow.pair_steps`` sets the S-Flow steps of pairs; groups keep ``steps``
+    and a caller's ``sflow_steps`` overrides both."""
+    _, model, _ = trained
+    copy = Path(shutil.copytree(model, tmp_path / "model"))
+    cfg = json.loads((copy / "config.json").read_text())
+    cfg["sflow"]["pair_steps"] = 1
+    (copy / "config.json").write_text(json.dumps(cfg))
+    pipe = UMFPipeline.from_pretrained(copy)
+    nfe = {n: pipe("a person walks", num_people=n, seconds=1.0, seed=0)[0].meta["nfe"]
+           for n in (2, 3)}  # fmt: skip
+    assert nfe == {2: 6 + 1, 3: 6 + 2 * 3}  # P-Flow 4 + 2; S-Flow 1 for pairs, 3 per person
+    s = pipe("a person walks", num_people=2, seconds=1.0, seed=0, sflow_steps=2)[0]
+    assert s.meta["nfe"] == 6 + 2

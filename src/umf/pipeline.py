@@ -280,7 +280,7 @@ class UMFPipeline:
                 mask,
                 text,
                 uncond,
-                steps=self.config.sflow.steps if req.sflow_steps is None else req.sflow_steps,
+                steps=req.sflow_steps or self.config.sflow.steps_for(num_people),
                 guidance=self.config.sflow.guidance if guidance is None else guidance,
                 generator=gen,
             )

@@ -301,7 +301,7 @@ def _check_value(where: str, kind: str, value: Any) -> None:
     if kind.startswith("bool"):
         if not isinstance(value, bool):
             raise UMFError(f"{where} must be true or false, got {value!r}")
-    elif kind.startswith("int") and name == "steps":
+    elif kind.startswith("int") and name in ("steps", "pair_steps"):
         check_int(where, value, 1, MAX_FLOW_STEPS)
     elif kind.startswith("int"):
         hi = 2**63 - 1 if name in _UNBOUNDED else MAX_LAYERS if "layers" in name else MAX_CONFIG_INT

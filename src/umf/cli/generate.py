@@ -26,6 +26,11 @@ from umf.validation import (
 )
 from umf.writer import clean_stale, scene_targets, write_scene_files
 
+SFLOW_STEPS_HELP = (
+    "S-Flow steps per added person, 1-200 (default: the model's; bundled: 3 for two people, "
+    "else 10)."
+)
+
 
 def _slug(text: str, limit: int = 40) -> str:
     return re.sub(r"[^a-z0-9]+", "-", text.lower()).strip("-")[:limit] or "scene"
@@ -104,7 +109,7 @@ def generate(
     seed: int = typer.Option(0, help="Random seed (0 to 2^64-1)."),
     guidance: float | None = typer.Option(None, help="CFG scale, 0-20 (model default)."),
     steps: str | None = typer.Option(None, help="P-Flow steps per stage: 45,5 (200 in all)."),
-    sflow_steps: int | None = typer.Option(None, help="S-Flow steps per person (1-200)."),
+    sflow_steps: int | None = typer.Option(None, help=SFLOW_STEPS_HELP),
     batch: int = typer.Option(1, "--batch", "-b", help="Samples per prompt (1-256)."),
     prompts: Path | None = typer.Option(None, help="Text file: one prompt per line."),
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
@@ -164,7 +169,7 @@ def react(
     seconds: float | None = typer.Option(None, help="How much of it to use (default: all)."),
     seed: int = typer.Option(0, help="Random seed (0 to 2^64-1)."),
     guidance: float | None = typer.Option(None, help="CFG scale, 0-20 (model default)."),
-    sflow_steps: int | None = typer.Option(None, help="S-Flow steps per person (1-200)."),
+    sflow_steps: int | None = typer.Option(None, help=SFLOW_STEPS_HELP),
     batch: int = typer.Option(1, "--batch", "-b", help="Scenes to sample around the actor."),
     formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
     out: Path = typer.Option(Path("out/react"), help="Output directory."),
