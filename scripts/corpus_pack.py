@@ -8,7 +8,7 @@ LZMA (about 10x smaller than ``clips.npz``), and the text cache's features in fl
 the cache's ``encoder.json`` so training runs without the encoder installed.
 
     python scripts/corpus_pack.py pack out/corpus .gpu              # motion.npz, text.npz
-    python scripts/corpus_pack.py pack out/corpus .gpu coarse   # 2 mm, 1e-3 steps: 20 % smaller
+    python scripts/corpus_pack.py pack out/corpus .gpu coarse   # 2 mm, 1e-3, int8 text
     python scripts/corpus_pack.py unpack .gpu out/corpus            # on the other machine
     python scripts/corpus_pack.py check out/corpus out/unpacked     # largest differences
 """
@@ -59,9 +59,13 @@ def decode_tracks(blob: bytes, shape: tuple[int, ...], step: float, starts: np.n
 
 
 def pack(
-    corpus: Path, out: Path, joint_step: float = JOINT_STEP, rot_step: float = ROT_STEP
+    corpus: Path,
+    out: Path,
+    joint_step: float = JOINT_STEP,
+    rot_step: float = ROT_STEP,
+    text_int8: bool = False,
 ) -> None:
-    """The steps travel in the pack, so ``unpack`` reads any of them."""
+    """The steps (and the text's quantisation) travel in the pack: ``unpack`` reads any."""
     out.mkdir(parents=True, exist_ok=True)
     with np.load(corpus / "clips.npz") as z:
         joints, rot6d, index_s = z["joints"], z["rot6d"], str(z["index"])
@@ -77,7 +81,7 @@ def pack(
         names=np.array(json.dumps(list(files))),
         **{f"file{i}": v for i, v in enumerate(files.values())},
     )
-    _pack_text(corpus, out / "text.npz")
+    _pack_text(corpus, out / "text.npz", int8=text_int8)
 
 
 def _z(data: bytes) -> np.ndarray:
@@ -88,8 +92,16 @@ def _unz(a: np.ndarray) -> bytes:
     return lzma.decompress(a.tobytes())
 
 
-def _pack_text(corpus: Path, out: Path) -> None:
-    """The cached features of every caption training asks for (nothing else)."""
+def quantise_rows(x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """int8 per row with a float16 scale (max |x| / 127): half of float16's bytes."""
+    scale = (np.abs(x).max(axis=1) / 127.0).astype(np.float16)
+    safe = np.where(scale > 0, scale.astype(np.float32), 1.0)[:, None]
+    return np.round(x / safe).clip(-127, 127).astype(np.int8), scale
+
+
+def _pack_text(corpus: Path, out: Path, int8: bool = False) -> None:
+    """The cached features of every caption training asks for (nothing else); ``int8``
+    stores them quantised per row (error under half a step of max |row| / 127)."""
     from safetensors import safe_open
 
     from umf.data.corpus import Corpus
@@ -110,14 +122,21 @@ def _pack_text(corpus: Path, out: Path) -> None:
             rel.append(str(path.relative_to(cache)))
             meta.append(fh.metadata())
             t = fh.get_tensor("tokens")
-            tokens.append(t.astype(np.float16))
-            pooled.append(fh.get_tensor("pooled").astype(np.float16))
+            tokens.append(t.astype(np.float32))
+            pooled.append(fh.get_tensor("pooled").astype(np.float32))
             lengths.append(t.shape[0])
-    blob = lzma.compress(np.concatenate(tokens).tobytes() + np.stack(pooled).tobytes(), preset=6)
+    tok, pool, scales = np.concatenate(tokens), np.stack(pooled), {}
+    if int8:
+        tok, scales["tok_scale"] = quantise_rows(tok)
+        pool, scales["pool_scale"] = quantise_rows(pool)
+    else:
+        tok, pool = tok.astype(np.float16), pool.astype(np.float16)
+    blob = lzma.compress(tok.tobytes() + pool.tobytes(), preset=6)
     np.savez(
         out, blob=np.frombuffer(blob, np.uint8), lengths=np.asarray(lengths),
         dim=np.asarray(pooled[0].shape[0]), rel=np.array(json.dumps(rel)),
         meta=np.array(json.dumps(meta)), encoder=np.array((cache / "encoder.json").read_text()),
+        **scales,
     )  # fmt: skip
 
 
@@ -150,8 +169,14 @@ def _unpack_text(packed: Path, cache: Path) -> None:
         lengths, dim = z["lengths"], int(z["dim"])
         raw = lzma.decompress(z["blob"].tobytes())
         n_tok = int(lengths.sum())
-        tokens = np.frombuffer(raw[: n_tok * dim * 2], np.float16).reshape(n_tok, dim)
-        pooled = np.frombuffer(raw[n_tok * dim * 2 :], np.float16).reshape(-1, dim)
+        if "tok_scale" in z.files:  # int8 rows with float16 scales
+            q = np.frombuffer(raw, np.int8).astype(np.float32)
+            tok_scale = z["tok_scale"].astype(np.float32)[:, None]
+            tokens = q[: n_tok * dim].reshape(n_tok, dim) * tok_scale
+            pooled = q[n_tok * dim :].reshape(-1, dim) * z["pool_scale"].astype(np.float32)[:, None]
+        else:
+            tokens = np.frombuffer(raw[: n_tok * dim * 2], np.float16).reshape(n_tok, dim)
+            pooled = np.frombuffer(raw[n_tok * dim * 2 :], np.float16).reshape(-1, dim)
         offsets = np.concatenate([[0], np.cumsum(lengths)])
         for i, (rel, meta) in enumerate(zip(json.loads(str(z["rel"])), json.loads(str(z["meta"])),
                                             strict=True)):  # fmt: skip
@@ -171,7 +196,10 @@ def check(a: Path, b: Path) -> None:
 
 if __name__ == "__main__":
     cmd, src, dst = sys.argv[1:4]
+    if sys.argv[4:] not in ([], ["coarse"]) or (sys.argv[4:] and cmd != "pack"):
+        raise SystemExit(f"unknown arguments {sys.argv[4:]}: only `pack SRC DST coarse` takes one")
     if cmd == "pack" and sys.argv[4:] == ["coarse"]:  # when the carry cap is tight
-        pack(Path(src), Path(dst), joint_step=2 * JOINT_STEP, rot_step=2 * ROT_STEP)
+        pack(Path(src), Path(dst), joint_step=2 * JOINT_STEP, rot_step=2 * ROT_STEP,
+             text_int8=True)  # fmt: skip
     else:
         {"pack": pack, "unpack": unpack, "check": check}[cmd](Path(src), Path(dst))

@@ -30,6 +30,8 @@ processes; the flows' while their latent banks are built).
 
 from __future__ import annotations
 
+import dataclasses
+import json
 import os
 import shutil
 import subprocess
@@ -78,7 +80,11 @@ def parent(budget: float, overrides: list[str], new_vae: bool, vae_only: bool = 
     run.mkdir(parents=True, exist_ok=True)
     cfg.save_yaml(run / "plan.yaml")
     OUT.mkdir(parents=True, exist_ok=True)
-    finished = run / "vae" / "finished"  # written once a VAE child exits cleanly
+    finished = run / "vae" / "finished"  # the VAE options, written once a VAE child exits cleanly
+    vae_opts = json.dumps(dataclasses.asdict(cfg.vae), sort_keys=True)
+    if new_vae and finished.exists() and finished.read_text() != vae_opts:
+        raise SystemExit(f"{finished}: a VAE trained with other vae.* options is there; "
+                         "remove it or use another RUNS")  # fmt: skip
     if new_vae and not finished.exists():
         vae_cfg = set_option(cfg, f"train_vae.num_workers={os.environ.get('VAE_WORKERS', '12')}")
         (run / "vae-cfg").mkdir(exist_ok=True)
@@ -93,7 +99,7 @@ def parent(budget: float, overrides: list[str], new_vae: bool, vae_only: bool = 
         if rc != 0:  # the flows need a finished VAE: a stopped or failed one ends the run
             raise SystemExit(f"VAE training stopped (exit {rc}, budget {budget:.0f} s); "
                              f"see {OUT / 'vae.log'}")  # fmt: skip
-        finished.touch()
+        finished.write_text(vae_opts)
         print(f"VAE done at {time.time() - t0:.0f} s", flush=True)
     if vae_only:
         for f in (run / "vae" / "best").iterdir():  # the VAE comes back even if the node goes

@@ -5,9 +5,16 @@
 #   call 1 (carry .gpu/pack):  scripts/gpu_train_t32.sh vae   BUDGET_S   # unpack motion, train the VAE
 #   call 2 (carry .gpu/text):  scripts/gpu_train_t32.sh flows BUDGET_S   # unpack text, train both flows
 # Both calls pass the same options, so the flows load the VAE they were planned with.
-# Packs: python scripts/corpus_pack.py pack out/corpus .gpu/pack coarse (then text.npz to .gpu/text).
+# With a VAE already trained (a model directory holding vae.safetensors, config.json and
+# normalizer.safetensors), call 1 is `motion` (unpack only) and call 2 carries that directory
+# too and names it: VAE_MODEL=.gpu/t32-vae scripts/gpu_train_t32.sh flows BUDGET_S.
+# The models it exports sample pairs at the S-Flow's 10 steps: choose sflow.pair_steps on the
+# val split afterwards (umf eval --split val --variant NAME=DIR:sflow_steps=3), as the
+# bundled model's 3 were chosen.
+# Packs: python scripts/corpus_pack.py pack out/corpus .gpu/pack coarse (then text.npz, int8
+# features: 14 MB, to .gpu/text).
 set -euo pipefail
-phase=$1 budget=$2
+phase=${1:-} budget=${2:-}
 export PYTHONPATH=$PWD/src PYTHONUNBUFFERED=1 RUNS=${RUNS:-$PWD/out/runs} CORPUS=${CORPUS:-out/corpus}
 OPTS=(
   --set vae.num_tokens=32 --set vae.token_span=5.0
@@ -25,17 +32,21 @@ OPTS=(
 )
 OPTS+=(${EXTRA:-})  # dry runs: fewer steps
 case $phase in
+  motion)
+    python scripts/corpus_pack.py unpack .gpu/pack "$CORPUS" ;;
   vae)
     python scripts/corpus_pack.py unpack .gpu/pack "$CORPUS"
     VAE_WORKERS=${VAE_WORKERS:-12} python scripts/gpu_flows_train.py "$budget" --vae-only "${OPTS[@]}" ;;
   flows)
     python scripts/corpus_pack.py unpack .gpu/text "$CORPUS"
     rc=0
+    if [ -n "${VAE_MODEL:-}" ]; then vae=(); export MODEL=$VAE_MODEL; else vae=(--vae); fi
     PFLOW_WORKERS=${PFLOW_WORKERS:-9} SFLOW_WORKERS=${SFLOW_WORKERS:-5} \
-      python scripts/gpu_flows_train.py "$budget" --vae "${OPTS[@]}" || rc=$?
+      python scripts/gpu_flows_train.py "$budget" "${vae[@]}" "${OPTS[@]}" || rc=$?
     # at most 8 files come back: the model's six, and one archive of logs and metrics
-    cd "$OUT" && tar czf training.tgz --remove-files ./*.log ./*-metrics.csv plan.yaml
+    cd "$OUT" && shopt -s nullglob && logs=(./*.log ./*-metrics.csv ./plan.yaml)
+    [ ${#logs[@]} -eq 0 ] || tar czf training.tgz --remove-files "${logs[@]}" || true
     rm -f best-*.safetensors
     exit $rc ;;
-  *) echo "usage: $0 vae|flows BUDGET_S" >&2; exit 2 ;;
+  *) echo "usage: $0 motion|vae|flows BUDGET_S" >&2; exit 2 ;;
 esac

@@ -52,3 +52,34 @@ def test_coarse_steps_travel_in_the_pack(tmp_path):
     err_r = max(np.abs(ca.rot6d - cb.rot6d).max() for ca, cb in pairs)
     assert err_j <= js / 2 + 1e-6 and err_r <= rs / 2 + 1e-6
     assert err_j > cp.JOINT_STEP / 2  # decoded at the pack's step, not the default's
+
+
+def test_text_features_travel_as_int8(tmp_path):
+    """``text_int8`` halves the text pack; every unpacked feature row stays within half a
+    quantisation step (max |row| / 254, plus float16 rounding) of the cached one."""
+    from safetensors.numpy import load_file
+
+    from umf.config import small_config
+    from umf.train.run import text_cache
+
+    cp = _load_script()
+    src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=3, val_scenes=1,
+                                 test_scenes=1, test_groups=1)  # fmt: skip
+    text_cache(small_config(), Corpus.load(src), progress=False)
+    cp.pack(src, tmp_path / "f16")
+    cp.pack(src, tmp_path / "q8", text_int8=True)
+    assert (tmp_path / "q8" / "text.npz").stat().st_size < (
+        0.75 * (tmp_path / "f16" / "text.npz").stat().st_size
+    )
+    cp.unpack(tmp_path / "q8", tmp_path / "unpacked")
+    cached = sorted((src / "text-cache").rglob("*.safetensors"))
+    assert cached
+    for path in cached:
+        a = load_file(str(path))
+        b = load_file(
+            str(tmp_path / "unpacked" / "text-cache" / path.relative_to(src / "text-cache"))
+        )
+        for key in ("tokens", "pooled"):
+            x, y = np.atleast_2d(a[key]), np.atleast_2d(b[key])
+            step = np.abs(x).max(axis=1, keepdims=True) / 127
+            assert np.all(np.abs(x - y) <= 0.5 * step * 1.01 + 1e-3 * step + 1e-6), (path, key)
