@@ -27,5 +27,6 @@ def test_distance_and_speed_on_the_floor_plane():
     b[:, 0, 2] = 1.2 * t  # ... walking forward at 1.2 m/s
     assert np.isclose(rp.pelvis_distance(a, a), 0.0)
     assert np.isclose(rp.pelvis_distance(a, b), np.mean(np.hypot(3.0, 1.2 * t)))
+    assert np.isclose(rp.start_distance(a, b), 3.0)
     assert np.isclose(rp.pelvis_speed(b, 30.0), 1.2)
     assert np.isclose(rp.pelvis_speed(a, 30.0), 0.0)
