@@ -9,6 +9,7 @@ the first frame alone (where person 2 starts), and person 2's pelvis speed. With
 person 1 fixed to real motion, a wrong distance is the S-Flow's alone, not the P-Flow's.
 
     python scripts/react_placement.py MODEL_DIR [MODEL_DIR ...] [--split val] [--scenes 64]
+        [--sflow-steps S]
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ def main() -> None:
     ap.add_argument("--corpus", default="out/corpus")
     ap.add_argument("--split", default="val")
     ap.add_argument("--scenes", type=int, default=64)
+    ap.add_argument("--sflow-steps", type=int, default=None, help="default: the model's")
     args = ap.parse_args()
     corpus = Corpus.load(args.corpus)
     recipes = [r for r in corpus.scenes[args.split] if r["num_people"] == 2][: args.scenes]
@@ -63,7 +65,7 @@ def main() -> None:
         d_gen, s_gen, v_gen = [], [], []
         for r, j in zip(recipes, real, strict=True):
             scene = pipe(r["captions"][0], num_people=2, seed=0, actor=j[0].astype(np.float32),
-                         separate=False, fit=False)[0]  # fmt: skip
+                         separate=False, fit=False, sflow_steps=args.sflow_steps)[0]  # fmt: skip
             g = scene.joints
             d_gen.append(pelvis_distance(g[0], g[1]))
             s_gen.append(start_distance(g[0], g[1]))
