@@ -162,6 +162,7 @@ CASES = [
     ([*T, "--set", "vae.num_heads=5"], 1, "cannot be built: embed_dim must be divisible"),
     ([*T, "--set", "pflow.steps=[0,5]"], 1, "pflow.steps must be between 1 and 200"),
     ([*T, "--set", "sflow.pair_steps=0"], 1, "sflow.pair_steps must be between 1 and 200"),
+    ([*T, "--set", "sflow.pair_steps=201"], 1, "sflow.pair_steps must be between 1 and 200"),
     ([*T, "--set", "train_vae.lr=-1"], 1, "need lr > 0"),
 ]
 

@@ -83,3 +83,19 @@ def test_text_features_travel_as_int8(tmp_path):
             x, y = np.atleast_2d(a[key]), np.atleast_2d(b[key])
             step = np.abs(x).max(axis=1, keepdims=True) / 127
             assert np.all(np.abs(x - y) <= 0.5 * step * 1.01 + 1e-3 * step + 1e-6), (path, key)
+
+
+def test_packs_without_steps_unpack_at_the_old_defaults(tmp_path):
+    """Packs written before the steps travelled (no ``steps`` entry) still unpack."""
+    cp = _load_script()
+    src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=3, val_scenes=1,
+                                 test_scenes=1, test_groups=1)  # fmt: skip
+    cp.pack(src, tmp_path / "packed")
+    path = tmp_path / "packed" / "motion.npz"
+    with np.load(path) as z:
+        old = {k: z[k] for k in z.files if k != "steps"}
+    np.savez(path, **old)
+    cp.unpack(tmp_path / "packed", tmp_path / "unpacked")
+    a, b = Corpus.load(src), Corpus.load(tmp_path / "unpacked")
+    for ca, cb in zip(a.clips, b.clips, strict=True):
+        assert np.abs(ca.joints - cb.joints).max() <= cp.JOINT_STEP / 2 + 1e-6
