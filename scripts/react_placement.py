@@ -18,25 +18,17 @@ import argparse
 
 import numpy as np
 
+from umf.data.clip import FPS
 from umf.data.corpus import Corpus
+from umf.eval.motion_stats import PELVIS, motion_statistics
 from umf.pipeline import UMFPipeline
 
 FRAMES = 150  # 5 s at 30 fps: inside every model's max_frames and the flows' training crops
 
 
-def pelvis_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """Mean horizontal distance (m) between two people's pelvises, (T, 22, 3) each."""
-    return float(np.linalg.norm(a[:, 0, [0, 2]] - b[:, 0, [0, 2]], axis=-1).mean())
-
-
-def start_distance(a: np.ndarray, b: np.ndarray) -> float:
-    """Horizontal distance (m) between two people's pelvises in the first frame."""
-    return float(np.linalg.norm(a[0, 0, [0, 2]] - b[0, 0, [0, 2]]))
-
-
-def pelvis_speed(x: np.ndarray, fps: float) -> float:
-    """Mean horizontal pelvis speed (m/s)."""
-    return float(np.linalg.norm(np.diff(x[:, 0, [0, 2]], axis=0), axis=-1).mean() * fps)
+def pelvis_gaps(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """Per frame, the floor distance (m) between two people's pelvises, (T, 22, 3) each."""
+    return np.linalg.norm(a[:, PELVIS, [0, 2]] - b[:, PELVIS, [0, 2]], axis=-1)
 
 
 def main() -> None:
@@ -50,10 +42,10 @@ def main() -> None:
     corpus = Corpus.load(args.corpus)
     recipes = [r for r in corpus.scenes[args.split] if r["num_people"] == 2][: args.scenes]
     real = [corpus.scene_joints(r)[:, :FRAMES] for r in recipes]
-    fps = 30.0
-    d_real = np.array([pelvis_distance(j[0], j[1]) for j in real])
-    s_real = np.array([start_distance(j[0], j[1]) for j in real])
-    v_real = np.array([pelvis_speed(j[1], fps) for j in real])
+    gaps_real = [pelvis_gaps(j[0], j[1]) for j in real]
+    d_real = np.array([g.mean() for g in gaps_real])
+    s_real = np.array([g[0] for g in gaps_real])
+    v_real = np.array([motion_statistics(j[1], FPS)["pelvis_speed"] for j in real])
     print(
         f"{len(recipes)} {args.split} pair scenes, {FRAMES} frames; real person 2: distance "
         f"median {np.median(d_real):.2f} m, pelvis speed median {np.median(v_real):.2f} m/s"
@@ -67,9 +59,10 @@ def main() -> None:
             scene = pipe(r["captions"][0], num_people=2, seed=0, actor=j[0].astype(np.float32),
                          separate=False, fit=False, sflow_steps=args.sflow_steps)[0]  # fmt: skip
             g = scene.joints
-            d_gen.append(pelvis_distance(g[0], g[1]))
-            s_gen.append(start_distance(g[0], g[1]))
-            v_gen.append(pelvis_speed(g[1], pipe.config.fps))
+            gaps = pelvis_gaps(g[0], g[1])
+            d_gen.append(gaps.mean())
+            s_gen.append(gaps[0])
+            v_gen.append(motion_statistics(g[1], pipe.config.fps)["pelvis_speed"])
         d_gen, v_gen = np.array(d_gen), np.array(v_gen)
         err, err0 = np.abs(d_gen - d_real), np.abs(np.array(s_gen) - s_real)
         print(f"{pipe.name} | {np.median(d_gen):.2f} | {np.median(err):.2f} | "

@@ -14,6 +14,17 @@ SHARED_BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "banda
 torch.set_num_threads(2)
 
 
+def load_script(name: str):
+    """A module of ``scripts/`` (not a package), imported from its file for testing."""
+    import importlib.util
+
+    path = Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py"
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def prepare_fixture_corpus(out: Path, **scenes: int) -> Path:
     """A small real corpus from the committed Bandai clips (``scenes``: PrepareConfig counts)."""
     from umf.data.corpus import PrepareConfig, prepare_corpus

@@ -2,26 +2,14 @@
 
 from __future__ import annotations
 
-import importlib.util
-from pathlib import Path
-
 import numpy as np
 
-from conftest import prepare_fixture_corpus
+from conftest import load_script, prepare_fixture_corpus
 from umf.data.corpus import Corpus
-
-SCRIPT = Path(__file__).resolve().parents[1] / "scripts" / "corpus_pack.py"
-
-
-def _load_script():
-    spec = importlib.util.spec_from_file_location("corpus_pack", SCRIPT)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
 
 
 def test_pack_unpack_round_trip(tmp_path):
-    cp = _load_script()
+    cp = load_script("corpus_pack")
     src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=6, val_scenes=2,
                                  test_scenes=2, test_groups=2)  # fmt: skip
     cp.pack(src, tmp_path / "packed")
@@ -40,7 +28,7 @@ def test_pack_unpack_round_trip(tmp_path):
 
 def test_coarse_steps_travel_in_the_pack(tmp_path):
     """A pack made with coarser steps unpacks with them (not the module's defaults)."""
-    cp = _load_script()
+    cp = load_script("corpus_pack")
     src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=3, val_scenes=1,
                                  test_scenes=1, test_groups=1)  # fmt: skip
     js, rs = 4 * cp.JOINT_STEP, 4 * cp.ROT_STEP
@@ -62,7 +50,7 @@ def test_text_features_travel_as_int8(tmp_path):
     from umf.config import small_config
     from umf.train.run import text_cache
 
-    cp = _load_script()
+    cp = load_script("corpus_pack")
     src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=3, val_scenes=1,
                                  test_scenes=1, test_groups=1)  # fmt: skip
     text_cache(small_config(), Corpus.load(src), progress=False)
@@ -87,7 +75,7 @@ def test_text_features_travel_as_int8(tmp_path):
 
 def test_packs_without_steps_unpack_at_the_old_defaults(tmp_path):
     """Packs written before the steps travelled (no ``steps`` entry) still unpack."""
-    cp = _load_script()
+    cp = load_script("corpus_pack")
     src = prepare_fixture_corpus(tmp_path / "corpus", train_scenes=3, val_scenes=1,
                                  test_scenes=1, test_groups=1)  # fmt: skip
     cp.pack(src, tmp_path / "packed")
