@@ -8,6 +8,9 @@
 # With a VAE already trained (a model directory holding vae.safetensors, config.json and
 # normalizer.safetensors), call 1 is `motion` (unpack only) and call 2 carries that directory
 # too and names it: VAE_MODEL=.gpu/t32-vae scripts/gpu_train_t32.sh flows BUDGET_S.
+# The VAE's options then come from that directory's config.json (the vae.* options below are
+# not applied), so the same call retrains the flows of any model, e.g. the bundled 16-token
+# one: VAE_MODEL=src/umf/assets/model FLOW_STEPS=8000 scripts/gpu_train_t32.sh flows 565.
 # The models it exports sample pairs at the S-Flow's 10 steps: choose sflow.pair_steps on the
 # val split afterwards (umf eval --split val --variant NAME=DIR:sflow_steps=3), as the
 # bundled model's 3 were chosen.
@@ -16,10 +19,14 @@
 set -euo pipefail
 phase=${1:-} budget=${2:-}
 export PYTHONPATH=$PWD/src PYTHONUNBUFFERED=1 RUNS=${RUNS:-$PWD/out/runs} CORPUS=${CORPUS:-out/corpus}
-OPTS=(
+VAE_OPTS=(
   --set vae.num_tokens=32 --set vae.token_span=5.0
   --set train_vae.max_steps=2000 --set train_vae.batch_size=128 --set train_vae.warmup_steps=300
   --set train_vae.val_every=1000 --set train_vae.ckpt_every=1000 --set train_vae.log_every=25
+)
+[ -n "${VAE_MODEL:-}" ] && VAE_OPTS=()  # a carried VAE brings its own options
+OPTS=(
+  "${VAE_OPTS[@]}"
   --set pflow.guidance=2.0 --set sflow.guidance=2.0
   --set train_pflow.max_steps=${FLOW_STEPS:-5000} --set train_sflow.max_steps=${FLOW_STEPS:-5000}
   --set train_pflow.batch_size=512 --set train_sflow.batch_size=512
