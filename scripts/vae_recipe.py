@@ -36,7 +36,7 @@ import torch
 from umf.checkpoint import load_checkpoint
 from umf.config import UMFConfig
 from umf.data.corpus import Corpus
-from umf.eval.protocol import ProtocolConfig, corpus_items, embed_motions, embed_texts, set_metrics
+from umf.eval.protocol import aligned_scores, corpus_items
 from umf.eval.reconstruction import reconstruct, reconstruction_metrics
 from umf.models.vae import MotionVAE
 from umf.train.run import best_or_last
@@ -64,23 +64,10 @@ def wrists_above_head(features: list[np.ndarray]) -> float:
 
 def protocol(evaluator, items, recon, replications: int = 5) -> dict[str, float]:
     """Single-person FID / R-precision of reconstructions, aligned with the real items."""
-    cfg = ProtocolConfig(replications=replications)
-    real_emb = embed_motions(evaluator, [it.features for it in items])
-    rec_emb = embed_motions(evaluator, [r[None] for r in recon])
-    caps = sorted({c for it in items for c in it.captions})
-    text_of = dict(zip(caps, embed_texts(evaluator, caps), strict=True))
-    rows = {"real": [], "recon": []}
-    for r in range(replications):
-        rng = np.random.default_rng([0, r])
-        order = rng.permutation(len(items))
-        n = (len(items) // cfg.group) * cfg.group
-        idx = order[:n]
-        text = np.stack([text_of[items[i].captions[int(rng.integers(len(items[i].captions)))]]
-                         for i in idx])  # fmt: skip
-        for name, emb in (("real", real_emb), ("recon", rec_emb)):
-            rows[name].append(set_metrics(text, emb[idx], real_emb, np.random.default_rng(r), cfg))
-    return {f"{name}_{k}": float(np.mean([row[k] for row in v]))
-            for name, v in rows.items() for k in ("fid", "r_precision_top3")}  # fmt: skip
+    real = aligned_scores(evaluator, items, [it.features for it in items], replications)
+    rec = aligned_scores(evaluator, items, [r[None] for r in recon], replications)
+    return {f"{name}_{k}": v for name, row in (("real", real), ("recon", rec))
+            for k, v in row.items()}  # fmt: skip
 
 
 def score(args: argparse.Namespace) -> None:

@@ -584,3 +584,21 @@ def test_unreadable_checkpoint_is_not_called_pickled(tmp_path):
     bad.write_bytes(b"not a checkpoint")
     with pytest.raises(UMFError, match="cannot read"):
         E._torch_load(bad, allow_pickle=False)
+
+
+def test_aligned_scores_real_items_against_themselves_and_a_shuffle():
+    ev, items = tiny(), _items(40)
+    cfg = P.ProtocolConfig(group=8, diversity_pairs=30)
+    real = P.aligned_scores(ev, items, [it.features for it in items], 3, cfg)
+    assert set(real) == {"fid", "r_precision_top3"}
+    assert real["fid"] == pytest.approx(0.0, abs=1e-6)  # 40 = 5 groups: all of it
+    # each scene shown with another item's caption: the same set (FID 0) but misaligned
+    rolled = [items[(i + 1) % 40].features for i in range(40)]
+    shuffled = P.aligned_scores(ev, items, rolled, 3, cfg)
+    assert shuffled["fid"] == pytest.approx(0.0, abs=1e-6)
+    noise = [np.random.default_rng(i).normal(size=it.features.shape) * 3
+             for i, it in enumerate(items)]  # fmt: skip
+    assert P.aligned_scores(ev, items, noise, 3, cfg)["fid"] > 1.0
+    assert P.aligned_scores(ev, items, [it.features for it in items], 3, cfg) == real  # seeded
+    with pytest.raises(UMFError, match="39 scenes for 40 items"):
+        P.aligned_scores(ev, items, rolled[:39], 3, cfg)

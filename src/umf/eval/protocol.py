@@ -193,6 +193,35 @@ def set_metrics(
     return out
 
 
+def aligned_scores(
+    evaluator: MotionTextEvaluator,
+    items: Sequence[EvalItem],
+    scenes: Sequence[Array],
+    replications: int = 5,
+    cfg: ProtocolConfig | None = None,
+) -> dict[str, float]:
+    """Mean FID and R-precision top-3 of ``scenes`` (P, T_i, 262) aligned with ``items``
+    (scene i shows item i: a reconstruction, or a generation around item i's real person),
+    over ``replications`` draws of complete groups and captions; the real items are the
+    FID reference. Passing the items' own features scores the real data."""
+    cfg = cfg or ProtocolConfig()
+    if len(scenes) != len(items):
+        raise UMFError(f"{len(scenes)} scenes for {len(items)} items")
+    real_emb = embed_motions(evaluator, [it.features for it in items], cfg.batch_size,
+                             cfg.max_frames)  # fmt: skip
+    emb = embed_motions(evaluator, scenes, cfg.batch_size, cfg.max_frames)
+    caps = sorted({c for it in items for c in it.captions})
+    text_of = dict(zip(caps, embed_texts(evaluator, caps, cfg.batch_size), strict=True))
+    rows = []
+    for r in range(replications):
+        rng = np.random.default_rng([0, r])
+        idx = rng.permutation(len(items))[: (len(items) // cfg.group) * cfg.group]
+        text = np.stack([text_of[items[i].captions[int(rng.integers(len(items[i].captions)))]]
+                         for i in idx])  # fmt: skip
+        rows.append(set_metrics(text, emb[idx], real_emb, np.random.default_rng(r), cfg))
+    return {k: float(np.mean([row[k] for row in rows])) for k in ("fid", "r_precision_top3")}
+
+
 def _evaluated_set(items: Sequence[EvalItem], rng: np.random.Generator, group: int):
     """(shuffled item indices of the complete groups, one drawn caption per item)."""
     order = rng.permutation(len(items))
