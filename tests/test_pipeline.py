@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import BANDAI_FIXTURE, TINY_MODEL, prepare_fixture_corpus
+from conftest import BANDAI_FIXTURE, TINY_MODEL, prepare_fixture_corpus, save_tiny_model
 from umf.config import set_option, small_config
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline, delivered_joints
@@ -380,3 +380,33 @@ def test_pair_steps_apply_to_two_people_only(trained, tmp_path):
     assert nfe == {2: 6 + 1, 3: 6 + 2 * 3}  # P-Flow 4 + 2; S-Flow 1 for pairs, 3 per person
     s = pipe("a person walks", num_people=2, seconds=1.0, seed=0, sflow_steps=2)[0]
     assert s.meta["nfe"] == 6 + 2
+
+
+def test_a_flow_stage_fine_tunes_from_a_model(trained, tmp_path):
+    """--init: a fresh run takes the model's VAE, and its S-Flow starts from the model's
+    weights (and latent statistics), not from a new initialisation."""
+    from umf.checkpoint import read_weights
+
+    root, _, _ = trained
+    model = save_tiny_model(tmp_path / "source", seed=7)  # not the run's own initialisation
+    cfg = small_config()
+    tuning = ["train_sflow.lr=0.000000001", "train_sflow.warmup_steps=0", "train_sflow.max_steps=2"]
+    for o in [*TINY, *tuning]:
+        cfg = set_option(cfg, o)
+    run = tmp_path / "ft"
+    logs: list[str] = []
+    train_stage("sflow", root / "corpus", run, cfg, Launch(progress=False), init=model,
+                log=logs.append)  # fmt: skip
+    assert (run / "vae" / "best" / "vae.safetensors").exists()
+    assert any("starting from the weights" in m for m in logs)
+    start = read_weights(model, "sflow")
+    tuned = read_weights(run / "sflow" / "last", "sflow")
+    assert start.keys() == tuned.keys()
+    for k in start:  # lr ~0: the weights it trained are the ones it started from
+        assert torch.allclose(tuned[k].float(), start[k].float(), atol=1e-3), k
+    with pytest.raises(UMFError, match="not a model directory"):
+        train_stage("sflow", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False),
+                    init=tmp_path)  # fmt: skip
+    with pytest.raises(UMFError, match="not the VAE"):
+        train_stage("vae", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False),
+                    init=model)  # fmt: skip

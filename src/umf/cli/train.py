@@ -23,6 +23,8 @@ PRECISION = typer.Option("32-true", help="32-true, bf16-mixed, 16-mixed.")
 RESUME = typer.Option(False, "--resume", help="Continue a killed run from its last checkpoint.")
 PROGRESS = typer.Option(True, help="Show progress bars.")
 TB = typer.Option(False, "--tensorboard", help="Also log to TensorBoard (if installed).")
+INIT = typer.Option(None, "--init", help="Fine-tune: start from this model directory's weights "
+                    "for the stage (and use its VAE if the run has none).")  # fmt: skip
 
 
 def _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard):
@@ -32,13 +34,16 @@ def _launch(accelerator, devices, num_nodes, strategy, precision, progress, tens
     return Launch(accelerator, dev, num_nodes, strategy, precision, progress, tensorboard)
 
 
-def _run(stages, corpus, out, family, config, set_, max_steps, launch, resume) -> None:
+def _run(stages, corpus, out, family, config, set_, max_steps, launch, resume,
+         init: Path | None = None) -> None:  # fmt: skip
     from umf.train.run import resolve_config, train_stage
 
+    if init is not None and family is None and config is None:
+        config = Path(init) / "config.json"  # fine-tuning keeps the model's configuration
     cfg = resolve_config(out, family, config, set_)
     for stage in stages:
         summary = train_stage(stage, corpus, out, cfg, launch, resume=resume,
-                              max_steps=max_steps, log=typer.echo)  # fmt: skip
+                              max_steps=max_steps, init=init, log=typer.echo)  # fmt: skip
         typer.echo(
             f"{stage}: {summary.get('steps')} steps in {summary.get('seconds', 0):.0f} s "
             f"({summary.get('seconds_per_step', 0):.3f} s/step); best val "
@@ -52,11 +57,11 @@ def _stage_command(stage: str):
         config: Path | None = CONFIG, set_: list[str] = SET, max_steps: int | None = STEPS,
         accelerator: str = ACCEL, devices: str = DEVICES, num_nodes: int = NODES,
         strategy: str = STRATEGY, precision: str = PRECISION, resume: bool = RESUME,
-        progress: bool = PROGRESS, tensorboard: bool = TB,
+        progress: bool = PROGRESS, tensorboard: bool = TB, init: Path | None = INIT,
     ) -> None:  # fmt: skip
         launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress,
                          tensorboard)  # fmt: skip
-        _run([stage], corpus, out, family, config, set_, max_steps, launch, resume)
+        _run([stage], corpus, out, family, config, set_, max_steps, launch, resume, init)
 
     command.__doc__ = {
         "vae": "Train the motion VAE (single-person crops and scenes).",

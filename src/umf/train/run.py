@@ -159,6 +159,26 @@ def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, se
     return fit_body_normalizer(torch.cat(feats), placement_radius=radius)
 
 
+def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], None]) -> Path:
+    """Check a fine-tuning source; give the run that model's VAE if it has none yet."""
+    import shutil
+
+    if stage == "vae":
+        raise UMFError("--init starts a flow stage (pflow, sflow) from a model; not the VAE")
+    model = Path(model)
+    for name in ("vae", stage):
+        if not (model / f"{name}.safetensors").exists():
+            raise UMFError(f"{model}: not a model directory (no {name}.safetensors)")
+    if best_or_last(run_dir / "vae") is None:
+        (run_dir / "vae").mkdir(parents=True, exist_ok=True)
+        tmp = run_dir / "vae" / "best.tmp"
+        shutil.rmtree(tmp, ignore_errors=True)
+        shutil.copytree(model, tmp)
+        tmp.rename(run_dir / "vae" / "best")
+        log(f"vae: the run uses the VAE of {model}")
+    return model
+
+
 def _load_frozen(stage_dir: Path, name: str, module: torch.nn.Module, log=print) -> None:
     """A trained stage's weights: best, else last, else the last before it (warned about)."""
     if best_or_last(stage_dir) is None:
@@ -234,9 +254,16 @@ def train_stage(
     *,
     resume: bool = False,
     max_steps: int | None = None,
+    init: Path | None = None,
     log: Callable[[str], None] = print,
 ) -> dict[str, Any]:
-    """Train one stage of a run; the flow stages load the run's trained VAE (frozen)."""
+    """Train one stage of a run; the flow stages load the run's trained VAE (frozen).
+
+    ``init`` (flow stages): a model directory whose weights for this stage start the
+    training (fine-tuning), and whose VAE becomes the run's when the run has none; its
+    latent statistics come with the weights. A resumed run continues from its own
+    checkpoint instead.
+    """
     from umf.models.pflow import PFlow
     from umf.models.vae import MotionVAE
     from umf.train.loop import check_train_config, train
@@ -245,6 +272,8 @@ def train_stage(
     if stage not in STAGES:
         raise UMFError(f"unknown stage {stage!r} (choose {', '.join(STAGES)})")
     check_run_config(cfg)
+    if init is not None:
+        init = _init_model(init, stage, run_dir, log)
     corpus = Corpus.load(corpus_dir)
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
@@ -278,6 +307,13 @@ def train_stage(
                                                  stats_vae, bank_device(launch))  # fmt: skip
     if latents is not None:  # a resumed run restores the same statistics from its checkpoint
         st.trainable().latent_norm.fit(latents)
+    if init is not None:  # the latent statistics too: the weights were trained with them
+        from umf.checkpoint import checked_weights
+
+        module = st.trainable()
+        module.load_state_dict({k: v.to(module.state_dict()[k].dtype) for k, v in
+                                checked_weights(init, stage, module).items()})  # fmt: skip
+        log(f"{stage}: starting from the weights of {init}")
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
     return train(
         st, train_loader, val_loader, t, run_dir / stage,
