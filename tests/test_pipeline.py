@@ -404,6 +404,15 @@ def test_a_flow_stage_fine_tunes_from_a_model(trained, tmp_path):
     assert start.keys() == tuned.keys()
     for k in start:  # lr ~0: the weights it trained are the ones it started from
         assert torch.allclose(tuned[k].float(), start[k].float(), atol=1e-3), k
+    with pytest.raises(UMFError, match="--base MODEL_DIR"):
+        export_model(run, tmp_path / "tuned")  # no P-Flow trained in this run
+    tuned_model = export_model(run, tmp_path / "tuned", base=model, log=logs.append)
+    pipe = UMFPipeline.from_pretrained(tuned_model)
+    assert pipe(["two people bow"], num_people=2, seconds=1.0, seed=0)[0].joints.shape[0] == 2
+    assert "pflow: from" in " ".join(logs)
+    kept, source = read_weights(tuned_model, "pflow"), read_weights(model, "pflow")
+    assert kept.keys() == source.keys()
+    assert all(torch.allclose(kept[k].float(), source[k].float(), atol=1e-3) for k in kept)
     with pytest.raises(UMFError, match="not a model directory"):
         train_stage("sflow", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False),
                     init=tmp_path)  # fmt: skip

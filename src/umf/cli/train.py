@@ -124,8 +124,10 @@ def export(
     run: Path = typer.Option(..., "--run", help="A run directory with all three stages."),
     out: Path = typer.Option(..., "--out", help="Model directory to write."),
     fp16: bool = typer.Option(True, help="Store weights in fp16."),
-) -> None:
+    base: Path | None = typer.Option(None, "--base", help="Model directory supplying the "
+                                     "stages the run did not train (after --init)."),
+) -> None:  # fmt: skip
     """Collect a run's best checkpoints into one model directory."""
     from umf.train.run import export_model
 
-    typer.echo(f"model written to {export_model(run, out, fp16=fp16)}")
+    typer.echo(f"model written to {export_model(run, out, fp16=fp16, base=base, log=typer.echo)}")

@@ -325,14 +325,27 @@ def train_stage(
 
 
 def export_model(
-    run_dir: Path, out: Path, fp16: bool = True, log: Callable[[str], None] = print
+    run_dir: Path,
+    out: Path,
+    fp16: bool = True,
+    log: Callable[[str], None] = print,
+    base: Path | None = None,
 ) -> Path:
-    """One model directory from a run's best checkpoints (what from_pretrained loads)."""
+    """One model directory from a run's best checkpoints (what from_pretrained loads).
+
+    ``base``: a model directory that supplies the stages the run did not train (a run
+    that fine-tuned one flow with ``--init``); the run's config is the model's.
+    """
     cfg = UMFConfig.load_yaml(run_dir / "config.yaml")
     weights = {}
     for s in STAGES:
+        if best_or_last(run_dir / s) is None and base is not None:
+            weights[s] = read_weights(base, s)
+            log(f"{s}: from {base}")
+            continue
         if best_or_last(run_dir / s) is None:
-            raise UMFError(f"{run_dir / s}: no checkpoint; train this stage first")
+            raise UMFError(f"{run_dir / s}: no checkpoint; train this stage first (or "
+                           "pass --base MODEL_DIR for the stages not trained here)")  # fmt: skip
         weights[s] = load_first_good(checkpoint_candidates(run_dir / s),
                                      lambda p, s=s: read_weights(p, s), log)  # fmt: skip
     ck = load_first_good(checkpoint_candidates(run_dir / "vae"), load_checkpoint, log)
