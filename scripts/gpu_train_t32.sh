@@ -10,10 +10,13 @@
 # too and names it: VAE_MODEL=.gpu/t32-vae scripts/gpu_train_t32.sh flows BUDGET_S.
 # The VAE's options then come from that directory's config.json (the vae.* options below are
 # not applied), so the same call retrains the flows of any model, e.g. the bundled 16-token
-# one: VAE_MODEL=src/umf/assets/model FLOW_STEPS=8000 scripts/gpu_train_t32.sh flows 565.
-# The models it exports sample pairs at the S-Flow's 10 steps: choose sflow.pair_steps on the
-# val split afterwards (umf eval --split val --variant NAME=DIR:sflow_steps=3), as the
-# bundled model's 3 were chosen.
+# one: VAE_MODEL=src/umf/assets/model FLOW_STEPS=7000 scripts/gpu_train_t32.sh flows 565
+# (results/flows-long-h200-20261126: 8,600 planned, 7,000-7,750 reached in 575 s on an H200).
+# A model trained with `vae` samples pairs at the S-Flow's 10 steps (the small family's): choose
+# sflow.pair_steps on the val split afterwards (umf eval --split val --variant
+# NAME=DIR:sflow_steps=3), as the bundled model's 3 were chosen; with VAE_MODEL the carried
+# model's sampling settings (pair_steps included) are kept. The training options below (lr,
+# batch, EMA, latent passes, guidance 2) apply in both cases.
 # Packs: python scripts/corpus_pack.py pack out/corpus .gpu/pack coarse (then text.npz, int8
 # features: 14 MB, to .gpu/text).
 set -euo pipefail
@@ -26,7 +29,7 @@ VAE_OPTS=(
 )
 [ -n "${VAE_MODEL:-}" ] && VAE_OPTS=()  # a carried VAE brings its own options
 OPTS=(
-  "${VAE_OPTS[@]}"
+  ${VAE_OPTS[@]+"${VAE_OPTS[@]}"}  # (empty-safe under set -u on old bash too)
   --set pflow.guidance=2.0 --set sflow.guidance=2.0
   --set train_pflow.max_steps=${FLOW_STEPS:-5000} --set train_sflow.max_steps=${FLOW_STEPS:-5000}
   --set train_pflow.batch_size=512 --set train_sflow.batch_size=512

@@ -1,6 +1,6 @@
 """What bounds the two-person FID: the VAE, the S-Flow, or the P-Flow?
 
-Scores the split's real two-person items with the interaction evaluator three ways per
+Scores the split's real two-person items with the interaction evaluator five ways per
 model, aligned with the real items (same captions, same draws), raw decoder output:
 
 * ``vae``: both real people encoded and decoded by the model's VAE (posterior mean, the
@@ -26,6 +26,7 @@ from __future__ import annotations
 
 import argparse
 import time
+from pathlib import Path
 
 import numpy as np
 import torch
@@ -67,7 +68,9 @@ def main() -> None:
     rows = {"real": aligned_scores(evaluator, items, real, args.replications)}
     for spec in args.models:
         t0 = time.time()
-        name, _, path = spec.rpartition("=")
+        name, _, path = (
+            spec.partition("=") if "=" in spec and not Path(spec).exists() else ("", "", spec)
+        )
         pipe = UMFPipeline.from_pretrained(path)
         name = name or pipe.name
         most = pipe.config.vae.max_frames
@@ -93,8 +96,9 @@ def main() -> None:
             rows[f"{name}: {what}"] = aligned_scores(evaluator, items, scenes, args.replications)
         print(f"{name}: {time.time() - t0:.0f} s", flush=True)
     print(f"\n{len(items)} {args.split} two-person items, {args.replications} replications, "
-          f"interaction evaluator, raw output; S-Flow steps {args.sflow_steps or 'as the model'}, "
-          f"guidance {args.guidance or 'as the model'}\n")  # fmt: skip
+          f"interaction evaluator, raw output; S-Flow steps "
+          f"{'as the model' if args.sflow_steps is None else args.sflow_steps}, guidance "
+          f"{'as the model' if args.guidance is None else args.guidance}\n")  # fmt: skip
     print("| scenes | FID ↓ | R-precision top-3 ↑ |\n|---|---:|---:|")
     for name, s in rows.items():
         print(f"| {name} | {s['fid']:.2f} | {s['r_precision_top3']:.3f} |")

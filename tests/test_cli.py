@@ -88,6 +88,11 @@ def test_show_reads_bvh_and_npz(tmp_path):
         (["train", "vae", "--corpus", "c", "--out", "run", "--family", "huge"], "unknown config"),
         (["train", "vae", "--corpus", "c", "--out", "run", "--set", "vae.nope=1"], "nope"),
         (["train", "export", "--run", "nowhere", "--out", "m"], "config"),
+        (
+            ["train", "sflow", "--corpus", "c", "--out", "run", "--init", "nowhere"],
+            "not a model directory",
+        ),
+        (["train", "vae", "--corpus", "c", "--out", "run", "--init", "src"], "not a model"),
     ],
 )
 def test_errors_are_one_line(args, needle, tmp_path):

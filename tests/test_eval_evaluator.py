@@ -602,3 +602,11 @@ def test_aligned_scores_real_items_against_themselves_and_a_shuffle():
     assert P.aligned_scores(ev, items, [it.features for it in items], 3, cfg) == real  # seeded
     with pytest.raises(UMFError, match="39 scenes for 40 items"):
         P.aligned_scores(ev, items, rolled[:39], 3, cfg)
+    # 44 items, 40 per draw: each replication scores the same subset as the protocol's
+    more = _items(44)
+    one = P.ProtocolConfig(replications=1, group=8, diversity_pairs=30, mm_prompts=0)
+    real_fid = P.score_protocol(ev, more, None, one)["real"]["fid"][0]
+    got = P.aligned_scores(ev, more, [it.features for it in more], 1, one)["fid"]
+    assert got == pytest.approx(real_fid, rel=1e-9) and got > 0.0
+    first = [it.features for it in more[:40]] + [np.zeros_like(it.features) for it in more[40:]]
+    assert P.aligned_scores(ev, more, first, 1, one)["fid"] != pytest.approx(got)  # by index

@@ -413,6 +413,13 @@ def test_a_flow_stage_fine_tunes_from_a_model(trained, tmp_path):
     kept, source = read_weights(tuned_model, "pflow"), read_weights(model, "pflow")
     assert kept.keys() == source.keys()
     assert all(torch.allclose(kept[k].float(), source[k].float(), atol=1e-3) for k in kept)
+    resumed: list[str] = []  # a resumed run keeps its own checkpoint, not the model's
+    train_stage("sflow", root / "corpus", run, cfg, Launch(progress=False), init=model,
+                resume=True, log=resumed.append)  # fmt: skip
+    assert any("is not used" in m for m in resumed)
+    other = save_tiny_model(tmp_path / "other", seed=8)
+    with pytest.raises(UMFError, match="not the one of"):  # its S-Flow knows another VAE
+        train_stage("pflow", root / "corpus", run, cfg, Launch(progress=False), init=other)
     with pytest.raises(UMFError, match="not a model directory"):
         train_stage("sflow", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False),
                     init=tmp_path)  # fmt: skip

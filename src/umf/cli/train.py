@@ -36,10 +36,14 @@ def _launch(accelerator, devices, num_nodes, strategy, precision, progress, tens
 
 def _run(stages, corpus, out, family, config, set_, max_steps, launch, resume,
          init: Path | None = None) -> None:  # fmt: skip
+    from umf.errors import UMFError
     from umf.train.run import resolve_config, train_stage
 
-    if init is not None and family is None and config is None:
+    fresh = not (Path(out) / "config.yaml").exists()
+    if init is not None and family is None and config is None and fresh:
         config = Path(init) / "config.json"  # fine-tuning keeps the model's configuration
+        if not config.exists():
+            raise UMFError(f"{init}: not a model directory (no config.json)")
     cfg = resolve_config(out, family, config, set_)
     for stage in stages:
         summary = train_stage(stage, corpus, out, cfg, launch, resume=resume,
@@ -121,7 +125,7 @@ def evaluator(
 
 @app.command()
 def export(
-    run: Path = typer.Option(..., "--run", help="A run directory with all three stages."),
+    run: Path = typer.Option(..., "--run", help="A run directory (all three stages, or --base)."),
     out: Path = typer.Option(..., "--out", help="Model directory to write."),
     fp16: bool = typer.Option(True, help="Store weights in fp16."),
     base: Path | None = typer.Option(None, "--base", help="Model directory supplying the "

@@ -202,8 +202,10 @@ def aligned_scores(
 ) -> dict[str, float]:
     """Mean FID and R-precision top-3 of ``scenes`` (P, T_i, 262) aligned with ``items``
     (scene i shows item i: a reconstruction, or a generation around item i's real person),
-    over ``replications`` draws of complete groups and captions; the real items are the
-    FID reference. Passing the items' own features scores the real data."""
+    over ``replications`` draws of complete groups and captions (draw r seeded by [0, r],
+    whatever ``cfg.replications`` and ``cfg.seed`` say; ``cfg`` gives the group size and
+    the other protocol numbers); the real items are the FID reference. Passing the items'
+    own features scores the real data."""
     cfg = cfg or ProtocolConfig()
     if len(scenes) != len(items):
         raise UMFError(f"{len(scenes)} scenes for {len(items)} items")

@@ -160,7 +160,8 @@ def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, se
 
 
 def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], None]) -> Path:
-    """Check a fine-tuning source; give the run that model's VAE if it has none yet."""
+    """Check a fine-tuning source; give the run that model's VAE if it has none yet (a run
+    that has one must have this very VAE: the flow's weights were trained on its latents)."""
     import shutil
 
     if stage == "vae":
@@ -169,13 +170,23 @@ def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], Non
     for name in ("vae", stage):
         if not (model / f"{name}.safetensors").exists():
             raise UMFError(f"{model}: not a model directory (no {name}.safetensors)")
-    if best_or_last(run_dir / "vae") is None:
+    have = best_or_last(run_dir / "vae")
+    if have is None:
         (run_dir / "vae").mkdir(parents=True, exist_ok=True)
         tmp = run_dir / "vae" / "best.tmp"
         shutil.rmtree(tmp, ignore_errors=True)
         shutil.copytree(model, tmp)
         tmp.rename(run_dir / "vae" / "best")
         log(f"vae: the run uses the VAE of {model}")
+        return model
+    ours, theirs = read_weights(have, "vae"), read_weights(model, "vae")
+    same = ours.keys() == theirs.keys() and all(
+        ours[k].shape == theirs[k].shape and torch.equal(ours[k].float(), theirs[k].float())
+        for k in ours
+    )
+    if not same:
+        raise UMFError(f"{run_dir / 'vae'}: this run's VAE is not the one of {model}; "
+                       "fine-tune into a new --out")  # fmt: skip
     return model
 
 
@@ -272,6 +283,9 @@ def train_stage(
     if stage not in STAGES:
         raise UMFError(f"unknown stage {stage!r} (choose {', '.join(STAGES)})")
     check_run_config(cfg)
+    if init is not None and resume and best_or_last(run_dir / stage) is not None:
+        log(f"{stage}: resuming the run's own checkpoint; --init {init} is not used")
+        init = None
     if init is not None:
         init = _init_model(init, stage, run_dir, log)
     corpus = Corpus.load(corpus_dir)
@@ -311,7 +325,8 @@ def train_stage(
         from umf.checkpoint import checked_weights
 
         module = st.trainable()
-        module.load_state_dict({k: v.to(module.state_dict()[k].dtype) for k, v in
+        own = module.state_dict()
+        module.load_state_dict({k: v.to(own[k].dtype) for k, v in
                                 checked_weights(init, stage, module).items()})  # fmt: skip
         log(f"{stage}: starting from the weights of {init}")
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
@@ -338,6 +353,8 @@ def export_model(
     """
     cfg = UMFConfig.load_yaml(run_dir / "config.yaml")
     weights = {}
+    if base is not None and all(best_or_last(run_dir / s) is not None for s in STAGES):
+        log(f"every stage was trained in {run_dir}: --base {base} is not used")
     for s in STAGES:
         if best_or_last(run_dir / s) is None and base is not None:
             weights[s] = read_weights(base, s)
