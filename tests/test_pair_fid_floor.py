@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import numpy as np
+import pytest
 import torch
 
 from conftest import load_script
@@ -31,3 +33,16 @@ def test_start_as_puts_the_first_frame_on_the_reference_and_keeps_the_pose(real_
     assert torch.allclose(torch.cdist(a, a), torch.cdist(b, b), atol=1e-4)
     assert torch.allclose(moved[..., POS.stop + 66 :], walk[..., POS.stop + 66 :], atol=1e-6)
     assert not torch.allclose(moved[..., POS], walk[..., POS], atol=0.1)
+
+
+def test_pair_motion_stats_tells_a_glide_from_a_walk(real_joints):
+    pm = load_script("pair_motion_stats")
+    walk = real_joints[:90].numpy()
+    glide = np.repeat(walk[:1], 90, axis=0)  # the first pose, carried along the walk's path
+    glide = glide + (walk[:, :1] - walk[:1, :1]) * np.array([1.0, 0.0, 1.0])
+    w, g = pm.row([walk], 30.0), pm.row([glide], 30.0)
+    speed, ankle = pm.STATS.index("pelvis_speed"), pm.STATS.index("ankle_energy")
+    assert g[speed] == pytest.approx(w[speed], rel=0.05) and w[speed] > 0.5
+    assert g[ankle] < 0.05 < 0.5 < w[ankle]  # the same travel, still legs
+    steady = np.linspace(0, 1, 30)[:, None, None] * np.ones((30, 22, 3))
+    assert pm.acceleration(steady, 30.0) == pytest.approx(0.0, abs=1e-9)
