@@ -160,3 +160,35 @@ def test_sampler_default_steps_and_determinism() -> None:
     assert torch.equal(a.x, b.x) and not torch.equal(a.x, d.x)
     h = sample_semi_noise(v, c, method="heun", steps=10, cond=cond)
     assert h.nfe == 20
+
+
+def test_reaction_noise_starts_the_reaction_half_near_the_context() -> None:
+    """sigma > 0: the reaction half runs from C + sigma*eps' (mean C, spread sigma) to W;
+    the context half is unchanged; sigma 0 is the authors' path exactly."""
+    c, w, _ = _data(10, F64)
+    big_c, big_w = c.repeat(500, 1, 1), w.repeat(500, 1, 1)  # 2,000 draws per element
+    g = torch.Generator().manual_seed(0)
+    s = semi_noise_training_sample(big_c, big_w, generator=g, reaction_noise=0.5)
+    ctx_x, react_x = split_halves(s.x)
+    ctx_v, react_v = split_halves(s.target)
+    t = s.t[:, None, None]
+    start = (react_x - t * big_w) / (1 - t)  # the path's start, from x_t = t*W + (1-t)*start
+    torch.testing.assert_close(react_v, big_w - start, atol=1e-3, rtol=0)
+    noise = start - big_c
+    assert abs(float(noise.mean())) < 0.01 and abs(float(noise.std()) - 0.5) < 0.01
+    eps = (ctx_x - t * big_c) / (1 - t)  # the context half: eps -> C as before
+    torch.testing.assert_close(ctx_v, big_c - eps, atol=1e-3, rtol=0)
+    assert abs(float((eps * noise).mean())) < 0.01  # eps and eps' independent
+    g0, g1 = torch.Generator().manual_seed(3), torch.Generator().manual_seed(3)
+    plain = semi_noise_training_sample(c, w, generator=g0)
+    zero = semi_noise_training_sample(c, w, generator=g1, reaction_noise=0.0)
+    assert torch.equal(plain.x, zero.x) and torch.equal(plain.target, zero.target)
+    x0 = semi_noise_initial_state(c, generator=torch.Generator().manual_seed(4),
+                                  reaction_noise=0.5)  # fmt: skip
+    ref = semi_noise_initial_state(c, generator=torch.Generator().manual_seed(4))
+    assert torch.equal(split_halves(x0)[0], split_halves(ref)[0])  # same eps first
+    assert not torch.equal(split_halves(x0)[1], c)
+    assert torch.equal(semi_noise_initial_state(c, generator=g, reaction_only=True), c)
+    oracle = sample_semi_noise(_state_oracle(c, w), c, steps=10, reaction_noise=0.5,
+                               generator=torch.Generator().manual_seed(5))  # fmt: skip
+    torch.testing.assert_close(oracle.x, w, atol=1e-5, rtol=0)  # still ends at W

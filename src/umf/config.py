@@ -120,6 +120,9 @@ class SFlowConfig:
     lambda_recon: float = 1.0  # 0 = no reconstruction loss (ablation)
     reaction_only: bool = False  # noise-free reaction path (ablation)
     context_noise: float = 0.0  # perturb real context latents to look generated
+    # reaction half starts at C + reaction_noise * eps' (0 = the authors' semi-noise path:
+    # it starts at C, so person 2's randomness must come through the context half)
+    reaction_noise: float = 0.0
     shared_backbone: bool = False  # share the P-Flow transformer (ablation)
 
     def steps_for(self, num_people: int) -> int:

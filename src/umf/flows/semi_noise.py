@@ -8,6 +8,12 @@ The first half reconstructs the context C from noise (a regulariser that forces 
 network to model the context globally); the second half transforms the context into
 the reaction W. Sampling starts at [eps || C] and reads the reaction from the second
 half at t = 1. ``reaction_only`` is the noise-free ablation (state t*W + (1-t)*C).
+
+``reaction_noise`` sigma > 0 (not in the paper) starts the reaction half at C + sigma*eps'
+(eps' independent of eps) instead of C itself, in training and sampling alike: with the
+authors' path person 2's variation has to pass from the context half's noise, and a
+network that does not carry it over returns the conditional mean of W (for a gait, a still
+pose; ``results/flows-long-h200-20261126``).
 """
 
 from __future__ import annotations
@@ -63,10 +69,13 @@ def semi_noise_state(
     t: Tensor,
     *,
     reaction_only: bool = False,
+    reaction_start: Tensor | None = None,
 ) -> SemiNoiseSample:
-    """The joint state and target at time t (B,) for given C, W and eps."""
-    react_x = interpolate(context, reaction, t)
-    react_v = target_velocity(context, reaction)
+    """The joint state and target at time t (B,) for given C, W and eps; the reaction half
+    runs from ``reaction_start`` (default C) to W."""
+    start = context if reaction_start is None else reaction_start
+    react_x = interpolate(start, reaction, t)
+    react_v = target_velocity(start, reaction)
     if reaction_only:
         return SemiNoiseSample(x=react_x, t=t, target=react_v)
     ctx_x = interpolate(eps, context, t)
@@ -87,8 +96,9 @@ def semi_noise_training_sample(
     time_distribution: TimeDistribution = "uniform",
     time_loc: float = 0.0,
     time_scale: float = 1.0,
+    reaction_noise: float = 0.0,
 ) -> SemiNoiseSample:
-    """Draw t and eps and build the training state (SPEC 7)."""
+    """Draw t and eps (and eps' for ``reaction_noise``) and build the training state (SPEC 7)."""
     if context.shape != reaction.shape:
         raise ValueError(f"context {tuple(context.shape)} vs reaction {tuple(reaction.shape)}")
     t = sample_time(
@@ -103,7 +113,13 @@ def semi_noise_training_sample(
     eps = torch.randn(
         context.shape, generator=generator, device=context.device, dtype=context.dtype
     )
-    return semi_noise_state(context, reaction, eps, t, reaction_only=reaction_only)
+    start = None
+    if reaction_noise:
+        start = context + reaction_noise * torch.randn(
+            context.shape, generator=generator, device=context.device, dtype=context.dtype
+        )
+    return semi_noise_state(context, reaction, eps, t, reaction_only=reaction_only,
+                            reaction_start=start)  # fmt: skip
 
 
 def semi_noise_loss(
@@ -135,13 +151,20 @@ def semi_noise_initial_state(
     reaction_only: bool = False,
     noise: Tensor | None = None,
     generator: Generators = None,
+    reaction_noise: float = 0.0,
 ) -> Tensor:
-    """The t = 0 state [eps || C] (or C alone for the reaction-only path)."""
-    if reaction_only:
-        return context
-    if noise is None:
+    """The t = 0 state [eps || C] (or C alone for the reaction-only path); with
+    ``reaction_noise`` the reaction half is C + sigma*eps', drawn after eps."""
+    start = context
+    if not reaction_only and noise is None:
         noise = randn(context.shape, generator, device=context.device, dtype=context.dtype)
-    return torch.cat([noise, context], dim=-1)
+    if reaction_noise:
+        start = context + reaction_noise * randn(
+            context.shape, generator, device=context.device, dtype=context.dtype
+        )
+    if reaction_only:
+        return start
+    return torch.cat([noise, start], dim=-1)
 
 
 def sample_semi_noise(
@@ -154,14 +177,16 @@ def sample_semi_noise(
     noise: Tensor | None = None,
     generator: Generators = None,
     cond: Mapping[str, Any] | None = None,
+    reaction_noise: float = 0.0,
 ) -> ODESolution:
     """Integrate the joint state from t = 0 to 1 once and return the reaction half.
 
     One pass yields the reaction (the authors' release ran the ODE twice; SPEC 7 (b)).
     """
     x0 = semi_noise_initial_state(
-        context, reaction_only=reaction_only, noise=noise, generator=generator
-    )
+        context, reaction_only=reaction_only, noise=noise, generator=generator,
+        reaction_noise=reaction_noise,
+    )  # fmt: skip
     x1, nfe = integrate(velocity, x0, steps=steps, method=method, cond=cond)
     reaction = x1 if reaction_only else split_halves(x1)[1]
     return ODESolution(reaction, nfe)

@@ -144,8 +144,9 @@ class SFlow(nn.Module):
             prev = self.perturb_context(prev, prev_mask, generator)
         context = self.context(prev, prev_mask)
         sample = semi_noise_training_sample(
-            context, w, reaction_only=self.cfg.reaction_only, generator=generator
-        )
+            context, w, reaction_only=self.cfg.reaction_only, generator=generator,
+            reaction_noise=self.cfg.reaction_noise,
+        )  # fmt: skip
         b = w.shape[0]
         drop = torch.rand(b, generator=generator, device=w.device) < self.cfg.p_uncond
         pred = self.velocity(sample.x, sample.t, drop_text(text, uncond_text, drop))
@@ -199,5 +200,6 @@ class SFlow(nn.Module):
                 reaction_only=self.cfg.reaction_only,
                 generator=generator,
                 cond=cond,
+                reaction_noise=self.cfg.reaction_noise,
             )
         return self.latent_norm.denormalize(w), nfe
