@@ -20,6 +20,7 @@ import numpy as np
 from umf.data.clip import FPS
 from umf.data.corpus import Corpus
 from umf.eval.motion_stats import motion_statistics
+from umf.eval.physics import jitter
 from umf.pipeline import UMFPipeline, delivered_joints
 from umf.representation import CONTACT
 
@@ -27,14 +28,9 @@ FRAMES = 150
 STATS = ("pelvis_speed", "ankle_energy", "wrist_energy", "head_drop")
 
 
-def acceleration(joints: np.ndarray, fps: float) -> float:
-    """Mean joint acceleration magnitude (m/s²) of one person (T, 22, 3)."""
-    return float(np.linalg.norm(np.diff(joints, 2, axis=0), axis=-1).mean() * fps * fps)
-
-
 def row(people: list[np.ndarray], fps: float) -> list[float]:
     """Medians over people (T, 22, 3) of STATS and the acceleration."""
-    values = [[motion_statistics(j, fps)[k] for k in STATS] + [acceleration(j, fps)]
+    values = [[motion_statistics(j, fps)[k] for k in STATS] + [jitter(j, fps)["accel"]]
               for j in people]  # fmt: skip
     return list(np.median(np.array(values), axis=0))
 

@@ -45,4 +45,5 @@ def test_pair_motion_stats_tells_a_glide_from_a_walk(real_joints):
     assert g[speed] == pytest.approx(w[speed], rel=0.05) and w[speed] > 0.5
     assert g[ankle] < 0.05 < 0.5 < w[ankle]  # the same travel, still legs
     steady = np.linspace(0, 1, 30)[:, None, None] * np.ones((30, 22, 3))
-    assert pm.acceleration(steady, 30.0) == pytest.approx(0.0, abs=1e-9)
+    assert pm.row([steady], 30.0)[-1] == pytest.approx(0.0, abs=1e-9)  # no acceleration
+    assert pm.row([walk], 30.0)[-1] > 0.5
