@@ -164,6 +164,12 @@ CASES = [
     ([*T, "--set", "sflow.pair_steps=0"], 1, "sflow.pair_steps must be between 1 and 200"),
     ([*T, "--set", "sflow.pair_steps=201"], 1, "sflow.pair_steps must be between 1 and 200"),
     ([*T, "--set", "train_vae.lr=-1"], 1, "need lr > 0"),
+    (
+        [*T, "--set", "train_pflow.balance_labels=-1"],
+        1,
+        "train_pflow.balance_labels must be between 0 and",
+    ),
+    ([*T, "--set", "sflow.reaction_noise=-0.5"], 1, "sflow.reaction_noise must be between 0 and"),
 ]
 
 

@@ -155,6 +155,42 @@ def test_single_dataset_empty_split_is_an_error(corpus):
         D.SingleMotionDataset(corpus, "train", None, 50, 20)
 
 
+def test_label_repeats_shares():
+    labels = ["a"] * 8 + ["b"] * 2 + ["c"]
+    assert D.label_repeats(labels, 0.0) == [1] * 11
+    # power 1: every label gets the commonest one's share (8 items' worth)
+    r = D.label_repeats(labels, 1.0)
+    assert r == [1] * 8 + [4, 4] + [8]
+    # power 0.5: shares move towards sqrt(count): 8 : 2 * 2 : 1 * round(sqrt(8)) = 8 : 4 : 3
+    r = D.label_repeats(labels, 0.5)
+    assert r == [1] * 8 + [2, 2] + [3]
+    assert D.label_repeats([None, None, "x"], 1.0) == [1, 1, 2]  # unlabelled: one more group
+    assert D.label_repeats([], 1.0) == []
+    with pytest.raises(ValueError, match=">= 0"):
+        D.label_repeats(labels, -0.5)
+
+
+def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
+    clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
+    assert len(clips) >= 8
+    for clip in clips[:6]:
+        monkeypatch.setitem(clip.meta, "content", "common")
+    plain = D.SingleMotionDataset(corpus, "train", None, 20, 60)
+    ds = D.SingleMotionDataset(corpus, "train", None, 20, 60, balance=1.0)
+    ids = [clip.id for clip, _, _ in ds.items]
+    for clip in clips[:6]:
+        assert ids.count(clip.id) == 1
+    for clip in clips[6:]:  # a label of its own: six times, like the "common" label's six
+        assert ids.count(clip.id) == 6
+    assert len(ds) == len(plain) + 5 * len(clips[6:])
+    # each repeat is its own random crop
+    rare = [i for i, key in enumerate(ids) if key == clips[-1].id]
+    crops = {(ds[i]["start"], ds[i]["length"], ds[i]["mirrored"]) for i in rare}
+    assert len(crops) > 1
+    with pytest.raises(UMFError, match="balance_labels"):
+        D.SingleMotionDataset(corpus, "train", None, balance=-1.0)
+
+
 # --------------------------------------------------------------------- scenes
 def test_crop_recipe_equals_cropped_scene(corpus):
     actors = corpus.actors()

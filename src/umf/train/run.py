@@ -107,6 +107,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         if kind == "single":
             place = train and stage == "vae"
             ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
+                                     balance=t.balance_labels if train else 0.0,
                                      **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
