@@ -284,3 +284,10 @@ def test_sharded_sampler_shards_and_resumes():
     s0.set_epoch(0)
     s0.start = 2
     assert list(s0) == epoch0[2:] and len(s0) == 2
+
+
+def test_usable_workers_capped_at_the_cpus(monkeypatch):
+    monkeypatch.setattr(D.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    assert D.usable_workers(9) == 2 and D.usable_workers(1) == 1 and D.usable_workers(0) == 0
+    loader = D.make_loader(list(range(8)), 4, shuffle=False, num_workers=9)
+    assert loader.num_workers == 2

@@ -20,6 +20,7 @@ resumed run sees exactly the data an uninterrupted run would have seen.
 from __future__ import annotations
 
 import math
+import os
 import re
 from collections import Counter
 from collections.abc import Hashable, Iterator, Sequence
@@ -458,6 +459,13 @@ class ShardedSampler(Sampler[int]):
         return max(math.ceil(self.num_items / self.world_size) - self.start, 0)
 
 
+def usable_workers(num_workers: int) -> int:
+    """At most one loader worker per CPU this process may use: a config written on a
+    16-core GPU machine (``num_workers`` 9) then fine-tuned on a laptop must not fork 9."""
+    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
+    return max(0, min(num_workers, cpus or 1))
+
+
 def make_loader(
     dataset: Dataset,
     batch_size: int,
@@ -475,7 +483,7 @@ def make_loader(
         dataset,
         batch_size=batch_size,
         shuffle=shuffle,
-        num_workers=num_workers,
+        num_workers=usable_workers(num_workers),
         collate_fn=getattr(dataset, "collate", None),
         drop_last=shuffle if drop_last is None else drop_last,
         generator=torch.Generator().manual_seed(seed),

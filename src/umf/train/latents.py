@@ -15,7 +15,7 @@ from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
-from umf.train.datasets import MULTI_PERSON
+from umf.train.datasets import MULTI_PERSON, usable_workers
 
 
 @torch.no_grad()
@@ -43,7 +43,8 @@ def build_bank(
     for epoch in range(passes):
         dataset.set_epoch(epoch)
         loader = DataLoader(dataset, batch_size=batch_size, shuffle=False,
-                            collate_fn=dataset.collate, num_workers=num_workers)  # fmt: skip
+                            collate_fn=dataset.collate,
+                            num_workers=usable_workers(num_workers))  # fmt: skip
         for batch in loader:
             feats, mask = batch["features"].to(device), batch["mask"].to(device)
             if feats.dim() == 3:
