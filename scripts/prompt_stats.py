@@ -1,0 +1,66 @@
+"""Motion statistics of generated single people for prompts of your choice.
+
+How much does the wording of a prompt matter? Each prompt gives ``--samples`` people (4 s,
+seed 0, raw decoded motion: the same draws as ``scripts/motion_stats_report.py``), and one
+row of medians of ``umf.eval.motion_stats.motion_statistics`` (speeds m/s, heights m).
+With ``--label`` a first row gives the corpus's real clips of that content label.
+
+    python scripts/prompt_stats.py MODEL_DIR "A person walks backward." \\
+        "Somebody walks backwards." --label walk-back [--corpus out/corpus]
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from umf.eval import motion_stats as MS
+
+STATS = ("pelvis_speed", "backward_speed", "ankle_energy", "wrist_energy", "head_drop")
+
+
+def median_row(people: Sequence[np.ndarray], stats: Sequence[str] = STATS) -> list[float]:
+    """Median of each statistic over people (each (T, 22, 3) joints)."""
+    values = [MS.motion_statistics(j) for j in people]
+    return [float(np.median([v[s] for v in values])) for s in stats]
+
+
+def format_rows(rows: Sequence[tuple[str, int, list[float]]], stats=STATS) -> str:
+    head = "| prompt | people | " + " | ".join(stats) + " |"
+    rule = "|---|---:|" + "---:|" * len(stats)
+    body = [f"| {name} | {n} | " + " | ".join(f"{v:.2f}" for v in vals) + " |"
+            for name, n, vals in rows]  # fmt: skip
+    return "\n".join([head, rule, *body])
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model")
+    ap.add_argument("prompts", nargs="+")
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--label", help="a content label of the corpus (e.g. walk-back)")
+    ap.add_argument("--corpus", default="out/corpus")
+    args = ap.parse_args()
+    torch.set_num_threads(2)
+    from umf.pipeline import UMFPipeline
+
+    rows = []
+    if args.label:
+        from umf.data.corpus import Corpus
+
+        real = MS.real_joints_by_label(Corpus.load(args.corpus)).get(args.label)
+        if not real:
+            raise SystemExit(f"no real clips of label {args.label!r} in {args.corpus}")
+        rows.append((f"real clips: {args.label}", len(real), median_row(real)))
+    pipe = UMFPipeline.from_pretrained(args.model)
+    for prompt in args.prompts:
+        scenes = pipe([prompt] * args.samples, num_people=1, seconds=4.0, seed=0, fit=False)
+        rows.append((prompt, args.samples, median_row([s.raw_joints[0] for s in scenes])))
+    print(format_rows(rows))
+
+
+if __name__ == "__main__":
+    main()
