@@ -68,14 +68,15 @@ def stage_seconds(run: Path, stage: str) -> float | None:
     return max(times) if times else None
 
 
-def vae_mpjpe(run: Path) -> float | None:
-    """The VAE's best validation MPJPE (m) on the corpus's validation split."""
+def vae_mpjpe(run: Path, name: str = "mpjpe_m") -> float | None:
+    """The VAE's best validation MPJPE (m) on the corpus's validation split: global
+    (``mpjpe_m``, dominated by where the body is) or root-relative (``mpjpe_pose_m``)."""
     path = run / "vae" / "metrics.csv"
     if not path.exists():
         return None
     with path.open() as f:
         vals = [float(r["value"]) for r in csv.DictReader(f)
-                if r["split"] == "val" and r["name"] == "mpjpe_m"]  # fmt: skip
+                if r["split"] == "val" and r["name"] == name]  # fmt: skip
     return min(vals) if vals else None
 
 
@@ -115,7 +116,7 @@ def rows_for(
               "penetration cm, groups ↓", "NFE", "GFLOPs / scene", "s / scene",
               "training min"]  # fmt: skip
     if key == "latent":
-        header.insert(2, "VAE val MPJPE m ↓")
+        header[2:2] = ["VAE val MPJPE m ↓", "VAE val pose MPJPE cm ↓"]
     rows = [["real data", "test split", *[""] * (len(header) - 2)]]
     real = pairs["real"]
     rows[0][header.index("FID ↓")] = fmt(real["fid"])
@@ -148,7 +149,9 @@ def rows_for(
         ]  # fmt: skip
         if key == "latent":
             mp = vae_mpjpe(run) if run is not None else None
-            row.insert(2, "—" if mp is None else f"{mp:.3f}")
+            pose = vae_mpjpe(run, "mpjpe_pose_m") if run is not None else None
+            row[2:2] = ["—" if mp is None else f"{mp:.3f}",
+                        "—" if pose is None else f"{100 * pose:.1f}"]  # fmt: skip
         rows.append(row)
     return header, rows
 

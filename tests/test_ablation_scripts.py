@@ -24,7 +24,7 @@ def fid_cell(report: Path, name: str) -> str:
 
 
 def test_tables_are_rebuilt_from_the_reports(tmp_path):
-    sources = {"latent": RESULTS / "first-recipe" / "latent", "pyramid": RESULTS / "pyramid",
+    sources = {"latent": RESULTS / "latent", "pyramid": RESULTS / "pyramid",
                "sflow": RESULTS / "sflow"}  # fmt: skip
     for key, src in sources.items():
         (tmp_path / key).mkdir()
@@ -41,14 +41,19 @@ def test_tables_are_rebuilt_from_the_reports(tmp_path):
     what = "S-Flow reuses (and fine-tunes) the P-Flow transformer"
     assert f"| shared-backbone | {what} | {shared} |" in text
     assert "0 (same weights)" in text  # step allocations reuse the trained model
+    single = fid_cell(RESULTS / "latent" / "metrics.json", "single-token")
+    # no run directories here: the VAE columns say so rather than guess
+    what = "1 x 256 latent, no pyramid (one token cannot be halved)"
+    assert f"| single-token | {what} | — | — | {single} |" in text
     assert text.rstrip().endswith("hand-written text")
     assert (tmp_path / "ablations.png").stat().st_size > 10_000
 
 
 def test_committed_tables_cover_the_current_recipe():
     committed = (RESULTS / "README.md").read_text()
-    assert committed.startswith("# Ablations: the paper's Table 4, Table 5 on")  # no stale 3
-    for row in ("| p-flow |", "| steps-5-5 |", "| no-pyramid |", "| grid-pyramid |",
+    assert committed.startswith("# Ablations: the paper's Table 3, Table 4, Table 5 on")
+    for row in ("| multi-token |", "| single-token |", "| no-latent-adapter |",
+                "| p-flow |", "| steps-5-5 |", "| no-pyramid |", "| grid-pyramid |",
                 "| s-flow |", "| reaction-only |", "| no-recon-loss |",
                 "| no-context-adapter |", "| shared-backbone |"):  # fmt: skip
         assert row in committed
