@@ -3,7 +3,8 @@
 How much does the wording of a prompt matter? Each prompt gives ``--samples`` people (4 s,
 seed 0, raw decoded motion: the same draws as ``scripts/motion_stats_report.py``), and one
 row of medians of ``umf.eval.motion_stats.motion_statistics`` (speeds m/s, heights m).
-With ``--label`` a first row gives the corpus's real clips of that content label.
+With ``--label`` a first row gives the corpus's real single-person clips of that content
+label (any label of the corpus, e.g. walk-back; all splits pooled, at most 300 frames each).
 
     python scripts/prompt_stats.py MODEL_DIR "A person walks backward." \\
         "Somebody walks backwards." --label walk-back [--corpus out/corpus]
@@ -28,6 +29,13 @@ def median_row(people: Sequence[np.ndarray], stats: Sequence[str] = STATS) -> li
     return [float(np.median([v[s] for v in values])) for s in stats]
 
 
+def real_people(corpus, label: str, max_frames: int = 300) -> list[np.ndarray]:
+    """Joints of every single-person clip of a content label, train, val and test pooled."""
+    return [np.asarray(c.joints[0][:max_frames])
+            for split in ("train", "val", "test") for c in corpus.split_clips(split)
+            if c.num_people == 1 and c.meta.get("content") == label]  # fmt: skip
+
+
 def format_rows(rows: Sequence[tuple[str, int, list[float]]], stats=STATS) -> str:
     head = "| prompt | people | " + " | ".join(stats) + " |"
     rule = "|---|---:|" + "---:|" * len(stats)
@@ -41,9 +49,12 @@ def main() -> None:
     ap.add_argument("model")
     ap.add_argument("prompts", nargs="+")
     ap.add_argument("--samples", type=int, default=16)
-    ap.add_argument("--label", help="a content label of the corpus (e.g. walk-back)")
+    ap.add_argument("--label", help="a content label of the corpus (e.g. walk-back): a row of "
+                    "its real single-person clips, all splits pooled")  # fmt: skip
     ap.add_argument("--corpus", default="out/corpus")
     args = ap.parse_args()
+    if args.samples < 1:
+        ap.error(f"--samples must be at least 1, got {args.samples}")
     torch.set_num_threads(2)
     from umf.pipeline import UMFPipeline
 
@@ -51,7 +62,7 @@ def main() -> None:
     if args.label:
         from umf.data.corpus import Corpus
 
-        real = MS.real_joints_by_label(Corpus.load(args.corpus)).get(args.label)
+        real = real_people(Corpus.load(args.corpus), args.label)
         if not real:
             raise SystemExit(f"no real clips of label {args.label!r} in {args.corpus}")
         rows.append((f"real clips: {args.label}", len(real), median_row(real)))

@@ -167,8 +167,9 @@ CASES = [
     (
         [*T, "--set", "train_pflow.balance_labels=-1"],
         1,
-        "train_pflow.balance_labels must be between 0 and",
+        "train_pflow.balance_labels must be between 0 and 1",
     ),
+    ([*T, "--set", "train_pflow.balance_labels=2"], 1, "balance_labels must be between 0 and 1"),
     ([*T, "--set", "sflow.reaction_noise=-0.5"], 1, "sflow.reaction_noise must be between 0 and"),
 ]
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import sys
 
 import numpy as np
+import pytest
 
 from conftest import load_script, save_tiny_model
 
@@ -33,3 +34,33 @@ def test_prompt_stats_runs_on_a_model(tmp_path, fake_text, monkeypatch, capsys):
     out = capsys.readouterr().out.splitlines()
     assert [row.split(" | ")[0] for row in out[2:]] == ["| a walk", "| a bow"]
     assert all(row.split(" | ")[1] == "2" for row in out[2:])
+
+
+def test_real_people_of_any_content_label(tmp_path):
+    from conftest import prepare_fixture_corpus
+    from umf.data.corpus import Corpus
+
+    ps = load_script("prompt_stats")
+    corpus = Corpus.load(prepare_fixture_corpus(tmp_path / "c", train_scenes=2, val_scenes=1,
+                                                test_scenes=1))  # fmt: skip
+    singles = [c for c in corpus.clips if c.num_people == 1]
+    label = singles[0].meta["content"]
+    want = [c for c in singles if c.meta.get("content") == label]
+    people = ps.real_people(corpus, label)
+    assert len(people) == len(want) >= 1
+    assert all(p.shape[1:] == (22, 3) and len(p) <= 300 for p in people)
+    # labels outside the motion-statistics check are found too, unknown ones give nothing
+    other = next(c.meta["content"] for c in singles
+                 if c.meta["content"] not in ps.MS.LABELS)  # fmt: skip
+    assert ps.real_people(corpus, other)
+    assert ps.real_people(corpus, "no-such-label") == []
+
+
+def test_prompt_stats_refuses_zero_samples(tmp_path, monkeypatch, capsys):
+    ps = load_script("prompt_stats")
+    monkeypatch.setattr(sys, "argv", ["prompt_stats.py", str(tmp_path), "a walk",
+                                      "--samples", "0"])  # fmt: skip
+    with pytest.raises(SystemExit) as exit_:
+        ps.main()
+    assert exit_.value.code == 2
+    assert "--samples must be at least 1" in capsys.readouterr().err

@@ -164,10 +164,13 @@ def test_label_repeats_shares():
     # power 0.5: shares move towards sqrt(count): 8 : 2 * 2 : 1 * round(sqrt(8)) = 8 : 4 : 3
     r = D.label_repeats(labels, 0.5)
     assert r == [1] * 8 + [2, 2] + [3]
-    assert D.label_repeats([None, None, "x"], 1.0) == [1, 1, 2]  # unlabelled: one more group
+    # unlabelled items (other corpora) appear once and do not set the commonest count
+    assert D.label_repeats([None] * 50 + ["x", "x", "y"], 1.0) == [1] * 50 + [1, 1, 2]
+    assert D.label_repeats([None, None], 1.0) == [1, 1]
     assert D.label_repeats([], 1.0) == []
-    with pytest.raises(ValueError, match=">= 0"):
-        D.label_repeats(labels, -0.5)
+    for bad in (-0.5, 1.5):
+        with pytest.raises(ValueError, match="between 0 and 1"):
+            D.label_repeats(labels, bad)
 
 
 def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
@@ -187,8 +190,9 @@ def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
     rare = [i for i, key in enumerate(ids) if key == clips[-1].id]
     crops = {(ds[i]["start"], ds[i]["length"], ds[i]["mirrored"]) for i in rare}
     assert len(crops) > 1
-    with pytest.raises(UMFError, match="balance_labels"):
-        D.SingleMotionDataset(corpus, "train", None, balance=-1.0)
+    for bad in (-1.0, 2.0):
+        with pytest.raises(UMFError, match="balance_labels must be between 0 and 1"):
+            D.SingleMotionDataset(corpus, "train", None, balance=bad)
 
 
 # --------------------------------------------------------------------- scenes
@@ -291,3 +295,9 @@ def test_usable_workers_capped_at_the_cpus(monkeypatch):
     assert D.usable_workers(9) == 2 and D.usable_workers(1) == 1 and D.usable_workers(0) == 0
     loader = D.make_loader(list(range(8)), 4, shuffle=False, num_workers=9)
     assert loader.num_workers == 2
+    # without affinity (macOS, Windows): the CPU count; unknown: one worker at most
+    monkeypatch.delattr(D.os, "sched_getaffinity", raising=False)
+    monkeypatch.setattr(D.os, "cpu_count", lambda: 3)
+    assert D.usable_workers(9) == 3
+    monkeypatch.setattr(D.os, "cpu_count", lambda: None)
+    assert D.usable_workers(9) == 1 and D.usable_workers(0) == 0

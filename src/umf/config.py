@@ -184,8 +184,9 @@ class TrainConfig:
     num_workers: int = 0
     seed: int = 0
     latent_passes: int = 0  # flows: pre-encode this many epochs of crops (0 = encode per batch)
-    # single-person training items of rare content labels repeat (most/count)**balance_labels
-    # times per epoch (0 = as in the corpus; umf.train.datasets.label_repeats)
+    # single-person training items (VAE, P-Flow; not the S-Flow's scenes) of rare content
+    # labels repeat (most/count)**balance_labels times per epoch, 0 <= balance_labels <= 1
+    # (0 = as in the corpus, 1 = every label equal; umf.train.datasets.label_repeats)
     balance_labels: float = 0.0
 
 

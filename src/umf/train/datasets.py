@@ -186,22 +186,22 @@ class _EpochDataset(Dataset):
         return item_rng(self.seed, self.epoch, index)
 
 
-def label_repeats(labels: Sequence[Hashable], power: float) -> list[int]:
+def label_repeats(labels: Sequence[Hashable | None], power: float) -> list[int]:
     """How often each item appears per epoch so that rare labels are seen more often.
 
-    An item whose label has ``count`` items repeats round((most / count) ** power) times
-    (at least once), ``most`` being the commonest label's count: power 0 leaves the data as
-    it is, 1 gives every label the same share, 0.5 (the square root) moves each label's
-    share from count towards sqrt(count). Why: the Bandai corpus has 400+ clips of raising
-    hands and 11 training clips of walking backward, and a flow learns the rare ones late.
+    An item whose label has ``count`` items repeats round((most / count) ** power) times,
+    ``most`` being the commonest label's count: power 0 leaves the data as it is, 1 gives
+    every label the same share, 0.5 (the square root) moves each label's share from count
+    towards sqrt(count). Unlabelled items (None: corpora without content labels) appear once
+    and do not count towards ``most``. Why: the Bandai corpus has 348 training clips of
+    raising both hands and 11 of walking backward, and a flow learns the rare ones late.
     """
-    if power < 0:
-        raise ValueError(f"label balance power must be >= 0, got {power}")
-    counts = Counter(labels)
-    if not counts:
-        return []
-    most = max(counts.values())
-    return [max(1, round((most / counts[label]) ** power)) for label in labels]
+    if not 0 <= power <= 1:
+        raise ValueError(f"label balance power must be between 0 and 1, got {power}")
+    counts = Counter(label for label in labels if label is not None)
+    most = max(counts.values(), default=1)
+    return [1 if label is None else max(1, round((most / counts[label]) ** power))
+            for label in labels]  # fmt: skip
 
 
 # --------------------------------------------------------------------- single person
@@ -229,8 +229,8 @@ class SingleMotionDataset(_EpochDataset):
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
-        if balance < 0:
-            raise UMFError(f"balance_labels must be >= 0, got {balance}")
+        if not 0 <= balance <= 1:
+            raise UMFError(f"balance_labels must be between 0 and 1, got {balance}")
         self.normalizer = normalizer
         self.min_frames, self.max_frames = min_frames, max_frames
         self.random_placement, self.mirror = random_placement, mirror
