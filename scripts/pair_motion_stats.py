@@ -19,7 +19,7 @@ import numpy as np
 
 from umf.data.clip import FPS
 from umf.data.corpus import Corpus
-from umf.eval.motion_stats import motion_statistics
+from umf.eval.motion_stats import median_statistics
 from umf.eval.physics import jitter
 from umf.pipeline import UMFPipeline, delivered_joints
 from umf.representation import CONTACT
@@ -30,9 +30,8 @@ STATS = ("pelvis_speed", "ankle_energy", "wrist_energy", "head_drop")
 
 def row(people: list[np.ndarray], fps: float) -> list[float]:
     """Medians over people (T, 22, 3) of STATS and the acceleration."""
-    values = [[motion_statistics(j, fps)[k] for k in STATS] + [jitter(j, fps)["accel"]]
-              for j in people]  # fmt: skip
-    return list(np.median(np.array(values), axis=0))
+    accel = float(np.median([jitter(j, fps)["accel"] for j in people]))
+    return [*median_statistics(people, STATS, fps), accel]
 
 
 def main() -> None:

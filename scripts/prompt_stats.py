@@ -25,15 +25,12 @@ STATS = ("pelvis_speed", "backward_speed", "ankle_energy", "wrist_energy", "head
 
 def median_row(people: Sequence[np.ndarray], stats: Sequence[str] = STATS) -> list[float]:
     """Median of each statistic over people (each (T, 22, 3) joints)."""
-    values = [MS.motion_statistics(j) for j in people]
-    return [float(np.median([v[s] for v in values])) for s in stats]
+    return MS.median_statistics(people, stats)
 
 
-def real_people(corpus, label: str, max_frames: int = 300) -> list[np.ndarray]:
+def real_people(corpus, label: str) -> list[np.ndarray]:
     """Joints of every single-person clip of a content label, train, val and test pooled."""
-    return [np.asarray(c.joints[0][:max_frames])
-            for split in ("train", "val", "test") for c in corpus.split_clips(split)
-            if c.num_people == 1 and c.meta.get("content") == label]  # fmt: skip
+    return MS.real_joints_by_label(corpus, labels=None).get(label, [])
 
 
 def format_rows(rows: Sequence[tuple[str, int, list[float]]], stats=STATS) -> str:

@@ -117,3 +117,15 @@ def test_pelvis_speed_is_path_length_not_displacement():
     walk = still(121)
     walk[..., 2] += x[:, None]
     assert abs(MS.motion_statistics(walk)["pelvis_speed"] - 1.0) < 1e-6
+
+
+def test_median_statistics_is_the_median_person(real_joints):
+    walk = real_joints[:90].numpy()
+    fast = walk[::2].copy()  # every other frame: the same walk at twice the speed
+    people = [walk, fast, walk]
+    names = ("pelvis_speed", "head_drop")
+    med = MS.median_statistics(people, names)
+    each = [MS.motion_statistics(j) for j in people]
+    assert med == [float(np.median([e[n] for e in each])) for n in names]
+    pelvis = MS.motion_statistics(walk)["pelvis_speed"]
+    assert med[0] == pelvis and MS.motion_statistics(fast)["pelvis_speed"] > 1.5 * pelvis

@@ -14,7 +14,7 @@ clips' interquartile range widened by ``slack`` of that range on each side.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Collection, Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -97,11 +97,10 @@ def compare_label(
     """Check the label's statistics of generated joints against real joints (each (T, 22, 3))."""
     prompt, stats = LABELS[label]
     rs = [motion_statistics(j, fps) for j in real]
-    gs = [motion_statistics(j, fps) for j in generated]
+    medians = median_statistics(generated, stats, fps)
     out = []
-    for s in stats:
+    for s, g in zip(stats, medians, strict=True):
         q = np.percentile([r[s] for r in rs], [25, 50, 75])
-        g = float(np.median([x[s] for x in gs]))
         pad = slack * (q[2] - q[0])
         out.append(LabelCheck(label, prompt, s, (float(q[0]), float(q[1]), float(q[2])), g,
                               bool(q[0] - pad <= g <= q[2] + pad), len(rs)))  # fmt: skip
@@ -151,20 +150,33 @@ def few_real_clips(rows: Sequence[LabelCheck], least: int = FEW_REAL) -> dict[st
     return {r.label: r.real_count for r in rows if 0 < r.real_count < least}
 
 
-def real_clips_by_label(corpus, splits: Sequence[str] = ("train", "val", "test")) -> dict:
-    """The corpus's single-person clips of each label in ``LABELS``, in corpus order."""
+def median_statistics(people: Sequence[Array], stats: Sequence[str],
+                      fps: float = 30.0) -> list[float]:  # fmt: skip
+    """Median over people (each (T, 22, 3) joints) of each named statistic."""
+    values = [motion_statistics(j, fps) for j in people]
+    return [float(np.median([v[s] for v in values])) for s in stats]
+
+
+def real_clips_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),
+                        labels: Collection[str] | None = LABELS) -> dict:  # fmt: skip
+    """The corpus's single-person clips of each content label in ``labels`` (None: every
+    label the corpus has), in corpus order."""
     out: dict[str, list] = {}
     for split in splits:
         for clip in corpus.split_clips(split):
             label = clip.meta.get("content")
-            if clip.num_people == 1 and label in LABELS:
+            if clip.num_people == 1 and label is not None and (labels is None or label in labels):
                 out.setdefault(label, []).append(clip)
     return out
 
 
-def real_joints_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),
-                         max_frames: int = 300) -> dict[str, list[Array]]:  # fmt: skip
-    """Joints (T, 22, 3) of the corpus's single-person clips of each label in ``LABELS``
+def real_joints_by_label(
+    corpus,
+    splits: Sequence[str] = ("train", "val", "test"),
+    max_frames: int = 300,
+    labels: Collection[str] | None = LABELS,
+) -> dict[str, list[Array]]:
+    """Joints (T, 22, 3) of the corpus's single-person clips of each label in ``labels``
     (at most ``max_frames`` frames each, the longest motion the pipeline makes)."""
     return {label: [np.asarray(c.joints[0][:max_frames]) for c in clips]
-            for label, clips in real_clips_by_label(corpus, splits).items()}  # fmt: skip
+            for label, clips in real_clips_by_label(corpus, splits, labels).items()}  # fmt: skip

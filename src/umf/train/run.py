@@ -354,14 +354,15 @@ def export_model(
     """
     cfg = UMFConfig.load_yaml(run_dir / "config.yaml")
     weights = {}
-    if base is not None and all(best_or_last(run_dir / s) is not None for s in STAGES):
+    trained = {s: best_or_last(run_dir / s) is not None for s in STAGES}
+    if base is not None and all(trained.values()):
         log(f"every stage was trained in {run_dir}: --base {base} is not used")
     for s in STAGES:
-        if best_or_last(run_dir / s) is None and base is not None:
+        if not trained[s] and base is not None:
             weights[s] = read_weights(base, s)
             log(f"{s}: from {base}")
             continue
-        if best_or_last(run_dir / s) is None:
+        if not trained[s]:
             raise UMFError(f"{run_dir / s}: no checkpoint; train this stage first (or "
                            "pass --base MODEL_DIR for the stages not trained here)")  # fmt: skip
         weights[s] = load_first_good(checkpoint_candidates(run_dir / s),
