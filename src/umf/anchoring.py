@@ -24,8 +24,8 @@ delivered scenes' jerk stays below the raw output's (336 against 363 m/s³ for t
 pairs in the report below).
 
 Measured on the bundled model (`umf eval`, all 300 test pairs and 200 groups, after
-separation and the kinematic fit: `results/umf-small-bandai-h200-20261126b/protocol`):
-foot skating ratio 0.38 -> 0.08 for pairs (real 0.05), 0.47 -> 0.07 for groups (real
+separation and the kinematic fit: `results/umf-small-bandai-20261126c/protocol`):
+foot skating ratio 0.40 -> 0.10 for pairs (real 0.05), 0.42 -> 0.09 for groups (real
 0.04); a walk keeps 95 % of its raw speed, a run 90 % (now below the real range); bowing
 and hand-raising people drift half as much across the floor.
 """

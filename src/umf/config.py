@@ -110,9 +110,10 @@ class SFlowConfig:
     context_adapter: bool = True  # False: C = mean of previous latents (ablation)
     context_positional: bool = False
     steps: int = 10
-    # steps when the scene has two people; None = ``steps``. The bundled model sets 3:
-    # chosen on the val split for pairs (two-person FID 37.7 -> 32.0), while groups of 3+
-    # lose relation checks at 3 (results/umf-small-bandai-h200-20261126b, sflow-3-steps)
+    # steps when the scene has two people; None = ``steps``. The bundled model sets 4,
+    # chosen on the val split for pairs (fewer steps: lower FID, worse placement), while
+    # groups of 3+ lose relation checks below 10 (results/umf-small-bandai-20261126c;
+    # results/umf-small-bandai-h200-20261126b, sflow-3-steps)
     pair_steps: int | None = None
     solver: str = "euler"
     guidance: float = 3.0
