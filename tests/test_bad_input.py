@@ -171,6 +171,11 @@ CASES = [
     ),
     ([*T, "--set", "train_pflow.balance_labels=2"], 1, "balance_labels must be between 0 and 1"),
     ([*T, "--set", "sflow.reaction_noise=-0.5"], 1, "sflow.reaction_noise must be between 0 and"),
+    (
+        [*T, "--set", "train_pflow.respell_captions=maybe"],
+        1,
+        "train_pflow.respell_captions must be true or false",
+    ),
 ]
 
 

@@ -89,6 +89,41 @@ def test_mirror_caption_swaps_sides_and_is_an_involution():
         assert D.mirror_caption(D.mirror_caption(text)) == text
 
 
+def test_respell_caption_swaps_spellings_and_is_an_involution():
+    cases = {
+        "A person walks backwards.": "A person walks backward.",
+        "Someone steps BACKWARD, then forward": "Someone steps BACKWARDS, then forwards",
+        "Forwards and towards the door.": "Forward and toward the door.",
+        "a backwardness test, walks leftward": "a backwardness test, walks leftward",
+    }
+    for text, want in cases.items():
+        assert D.respell_caption(text) == want
+        assert D.respell_caption(want) == text
+
+
+def test_respelled_captions_leave_every_other_draw_alone(corpus, monkeypatch):
+    """``respell`` only rewrites about half the captions that have such a word; crops,
+    mirroring and features are the draws of the dataset without it."""
+    kw = dict(min_frames=20, max_frames=60, random_placement=False, mirror=True, seed=3)
+    plain = D.SingleMotionDataset(corpus, "train", None, **kw)
+    respelled = D.SingleMotionDataset(corpus, "train", None, respell=True, **kw)
+    for clip, _, _ in plain.items:  # every caption gets a word with another spelling
+        said = [c.rstrip(".") + ", then walks backwards." for c in clip.captions]
+        monkeypatch.setattr(clip, "captions", said)
+    changed = 0
+    for epoch in range(4):
+        plain.set_epoch(epoch), respelled.set_epoch(epoch)
+        for i in range(len(plain)):
+            a, b = plain[i], respelled[i]
+            assert (a["start"], a["length"], a["mirrored"]) == (b["start"], b["length"],
+                                                                b["mirrored"])  # fmt: skip
+            torch.testing.assert_close(a["features"], b["features"])
+            assert b["caption"] in (a["caption"], D.respell_caption(a["caption"]))
+            changed += b["caption"] != a["caption"]
+    total = 4 * len(plain)
+    assert 0.2 * total < changed < 0.8 * total, (changed, total)
+
+
 def test_crop_window_in_range():
     rng = np.random.default_rng(0)
     for _ in range(200):
@@ -301,3 +336,15 @@ def test_usable_workers_capped_at_the_cpus(monkeypatch):
     assert D.usable_workers(9) == 3
     monkeypatch.setattr(D.os, "cpu_count", lambda: None)
     assert D.usable_workers(9) == 1 and D.usable_workers(0) == 0
+
+
+def test_corpus_captions_hold_every_respelled_and_mirrored_form(corpus):
+    """The text cache must already hold what respelling and mirroring ask for."""
+    from umf.train.run import corpus_captions
+
+    texts = set(corpus_captions(corpus))
+    base = {c for clip in corpus.clips for c in clip.captions}
+    assert any(D.respell_caption(c) != c for c in base)  # the fixture has such words
+    for c in base:
+        assert D.respell_caption(c) in texts and D.mirror_caption(c) in texts
+        assert D.respell_caption(D.mirror_caption(c)) in texts

@@ -189,6 +189,9 @@ class TrainConfig:
     # labels repeat (most/count)**balance_labels times per epoch, 0 <= balance_labels <= 1
     # (0 = as in the corpus, 1 = every label equal; umf.train.datasets.label_repeats)
     balance_labels: float = 0.0
+    # give half the training captions the other spelling of direction words (backwards <->
+    # backward, forwards <-> forward, towards <-> toward; umf.train.datasets.respell_caption)
+    respell_captions: bool = False
 
 
 @dataclass

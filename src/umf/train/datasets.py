@@ -65,11 +65,22 @@ _SIDE_WORDS = {
     "anticlockwise": "clockwise",
     "anti-clockwise": "clockwise",
 }
-# longest alternatives first, so "counter-clockwise" is never read as "clockwise"
-_SIDE_RE = re.compile(
-    r"\b(" + "|".join(sorted(map(re.escape, _SIDE_WORDS), key=len, reverse=True)) + r")\b",
-    re.IGNORECASE,
-)
+# Spellings the captions use one way and people write the other: the corpus says "walks
+# backwards", a user types "walks backward", and the flows condition on token states, so
+# the unseen spelling alone cost walking backward three quarters of its speed
+# (results/finetunes-cpu-20261126/walk-back.md).
+_SPELLINGS = {"backwards": "backward", "forwards": "forward", "towards": "toward"}
+_SPELLINGS |= {v: k for k, v in _SPELLINGS.items()}
+
+
+def _word_re(words) -> re.Pattern:
+    # longest alternatives first, so "counter-clockwise" is never read as "clockwise"
+    alternatives = sorted(map(re.escape, words), key=len, reverse=True)
+    return re.compile(r"\b(" + "|".join(alternatives) + r")\b", re.IGNORECASE)
+
+
+_SIDE_RE = _word_re(_SIDE_WORDS)
+_SPELL_RE = _word_re(_SPELLINGS)
 
 
 # --------------------------------------------------------------------- pure functions
@@ -107,17 +118,28 @@ def canonicalize_features(features: Tensor) -> Tensor:
     return place_features(features, yaw, float(shift[0]), float(shift[2]))
 
 
-def mirror_caption(text: str) -> str:
-    """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
+def _swap_words(text: str, table: dict[str, str], pattern: re.Pattern) -> str:
+    """Replace every word of ``table`` in ``text`` by its partner, keeping its case."""
 
     def swap(m: re.Match) -> str:
         word = m.group(0)
-        out = _SIDE_WORDS[word.lower()]
+        out = table[word.lower()]
         if word.isupper() and len(word) > 1:
             return out.upper()
         return out[0].upper() + out[1:] if word[0].isupper() else out
 
-    return _SIDE_RE.sub(swap, text)
+    return pattern.sub(swap, text)
+
+
+def mirror_caption(text: str) -> str:
+    """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
+    return _swap_words(text, _SIDE_WORDS, _SIDE_RE)
+
+
+def respell_caption(text: str) -> str:
+    """The other spelling of direction words: backwards <-> backward, forwards <-> forward,
+    towards <-> toward (same meaning; training on both makes either prompt work)."""
+    return _swap_words(text, _SPELLINGS, _SPELL_RE)
 
 
 def crop_window(
@@ -160,12 +182,16 @@ def _finish(
     caption: str,
     rng: np.random.Generator,
     mirror: bool,
+    respell: bool = False,
 ) -> tuple[Tensor, str, bool]:
-    """Mirror with p = 0.5 (drawn last, so it never shifts the other draws) and normalise."""
+    """Mirror with p = 0.5, respell the caption with p = 0.5 (drawn last, and only when
+    asked, so neither shifts the other draws) and normalise."""
     mirrored = bool(mirror and rng.random() < 0.5)
     if mirrored:
         features = mirror_features(features)
         caption = mirror_caption(caption)
+    if respell and rng.random() < 0.5:
+        caption = respell_caption(caption)
     if normalizer is not None:
         features = normalizer.normalize(features)
     return features.float().contiguous(), caption, mirrored
@@ -212,6 +238,7 @@ class SingleMotionDataset(_EpochDataset):
     a real multi-person clip (dataset token 1, with the clip's caption). ``normalizer=None``
     serves raw features (for inspection). ``balance`` > 0 repeats the items of rare content
     labels (:func:`label_repeats`); each repeat draws its own crop, mirror and caption.
+    ``respell`` gives half the captions their other spelling (:func:`respell_caption`).
     """
 
     def __init__(
@@ -226,6 +253,7 @@ class SingleMotionDataset(_EpochDataset):
         seed: int = 0,
         placement_radius: float = PLACEMENT_RADIUS,
         balance: float = 0.0,
+        respell: bool = False,
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
@@ -234,6 +262,7 @@ class SingleMotionDataset(_EpochDataset):
         self.normalizer = normalizer
         self.min_frames, self.max_frames = min_frames, max_frames
         self.random_placement, self.mirror = random_placement, mirror
+        self.respell = respell
         self.placement_radius = placement_radius
         self.items: list[tuple[MotionClip, int, RigidTransform]] = []
         for clip in corpus.split_clips(split):
@@ -263,7 +292,7 @@ class SingleMotionDataset(_EpochDataset):
             yaw = float(rng.uniform(-math.pi, math.pi))
             dx, dz = rng.uniform(-self.placement_radius, self.placement_radius, size=2)
             f = place_features(f, yaw, float(dx), float(dz))
-        f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror)
+        f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror, self.respell)
         key = clip.id if clip.num_people == 1 else f"{clip.id}/p{person}"
         return {
             "features": f,
@@ -303,7 +332,8 @@ class SceneDataset(_EpochDataset):
 
     Serves the split's composed scenes and, with ``real_clips``, its real multi-person
     clips (InterHuman). Scenes with more than ``max_people`` people are left out rather
-    than truncated: their captions count everybody.
+    than truncated: their captions count everybody. ``respell``: as in
+    :class:`SingleMotionDataset`.
     """
 
     def __init__(
@@ -317,8 +347,10 @@ class SceneDataset(_EpochDataset):
         seed: int = 0,
         max_people: int | None = None,
         real_clips: bool = True,
+        respell: bool = False,
     ) -> None:
         super().__init__(seed)
+        self.respell = respell
         _check_frames(min_frames, max_frames)
         self.corpus, self.normalizer = corpus, normalizer
         self.min_frames, self.max_frames, self.mirror = min_frames, max_frames, mirror
@@ -354,7 +386,7 @@ class SceneDataset(_EpochDataset):
         captions = item.captions if kind == "clip" else item["captions"]
         caption = captions[int(rng.integers(len(captions)))] if captions else ""
         f = canonicalize_features(self._crop(kind, item, tf, start, length))
-        f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror)
+        f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror, self.respell)
         return {
             "features": f,
             "length": length,

@@ -100,10 +100,12 @@ def evaluator_loaders(corpus: Corpus, kind: str, t: TrainConfig, max_frames: int
     """(train, val) loaders of raw features: crops for training, whole items for validation."""
 
     def dataset(split: str, lo: int, hi: int, mirror: bool):
+        respell = mirror and t.respell_captions  # mirror: the training split
         if kind == "interaction":
             return SceneDataset(corpus, split, None, lo, hi, mirror=mirror, seed=t.seed,
-                                max_people=2)  # fmt: skip
-        return SingleMotionDataset(corpus, split, None, lo, hi, mirror=mirror, seed=t.seed)
+                                max_people=2, respell=respell)  # fmt: skip
+        return SingleMotionDataset(corpus, split, None, lo, hi, mirror=mirror, seed=t.seed,
+                                   respell=respell)  # fmt: skip
 
     hi = min(t.max_frames, max_frames)
     train_ds = dataset("train", min(t.min_frames, hi), hi, True)

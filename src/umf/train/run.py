@@ -103,7 +103,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
 
     def loader(kind: str, split: str):
         train = split == "train"
-        common = dict(mirror=train, seed=t.seed, **frames)
+        common = dict(mirror=train, seed=t.seed, respell=train and t.respell_captions, **frames)
         if kind == "single":
             place = train and stage == "vae"
             ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
@@ -213,8 +213,9 @@ def best_or_last(stage_dir: Path) -> Path | None:
 
 
 def corpus_captions(corpus: Corpus) -> list[str]:
-    """Every caption training can ask for: clips, scenes, their mirrored forms, and ''."""
-    from umf.train.datasets import mirror_caption
+    """Every caption training can ask for: clips, scenes, their mirrored and respelled
+    forms, and ''."""
+    from umf.train.datasets import mirror_caption, respell_caption
 
     texts = {""}
     for c in corpus.clips:
@@ -223,6 +224,7 @@ def corpus_captions(corpus: Corpus) -> list[str]:
         for r in recipes:
             texts.update(r["captions"])
     texts.update([mirror_caption(t) for t in texts])
+    texts.update([respell_caption(t) for t in texts])
     return sorted(texts)
 
 
