@@ -14,7 +14,7 @@
 # (results/flows-long-h200-20261126: 8,600 planned, 7,000-7,750 reached in 575 s on an H200).
 # A model trained with `vae` samples pairs at the S-Flow's 10 steps (the small family's): choose
 # sflow.pair_steps on the val split afterwards (umf eval --split val --variant
-# NAME=DIR:sflow_steps=3), as the bundled model's 3 were chosen; with VAE_MODEL the carried
+# NAME=DIR:sflow_steps=3), as the bundled model's 4 were chosen; with VAE_MODEL the carried
 # model's sampling settings (pair_steps included) are kept. The training options below (lr,
 # batch, EMA, latent passes, guidance 2) apply in both cases.
 # Packs: python scripts/corpus_pack.py pack out/corpus .gpu/pack coarse (then text.npz, int8

@@ -115,9 +115,10 @@ def test_generated_gestures_follow_the_prompt(pipe):
 
 def test_second_person_strides_beside_the_first(pipe):
     """Person 2 of "walk side by side" moves its legs, not a still pose carried along a
-    path: root-relative ankle speed, median over 4 seeds (real walks 1.2-1.4 m/s; the
-    S-Flow bundled before the noisy reaction start: 0.29 raw, 0.33 delivered; this one
-    0.9). Checked as delivered too, where anchored feet would expose a glide."""
+    path: root-relative ankle speed, median over 4 seeds, of the scenes as delivered
+    (anchored feet leave a glide standing still; real walks 1.2-1.4 m/s; the S-Flow
+    bundled before the noisy reaction start: 0.33, this one 0.93:
+    results/umf-small-bandai-20261126c/person2-two-prompts.md)."""
     from umf.eval.motion_stats import median_statistics
 
     scenes = [pipe("Two people walk side by side.", num_people=2, seconds=4.0, seed=s)[0]

@@ -1,3 +1,4 @@
+import dataclasses
 import math
 
 import numpy as np
@@ -339,12 +340,36 @@ def test_usable_workers_capped_at_the_cpus(monkeypatch):
 
 
 def test_corpus_captions_hold_every_respelled_and_mirrored_form(corpus):
-    """The text cache must already hold what respelling and mirroring ask for."""
+    """The text cache must already hold what respelling and mirroring ask for, and a cache
+    built before respelling existed still serves runs that do not respell."""
     from umf.train.run import corpus_captions
 
-    texts = set(corpus_captions(corpus))
+    texts = set(corpus_captions(corpus, respell=True))
+    plain = set(corpus_captions(corpus))
     base = {c for clip in corpus.clips for c in clip.captions}
+    extra = texts - plain  # only asked for: every extra is a respelling of a caption
+    assert extra and all(D.respell_caption(t) in plain for t in extra)
     assert any(D.respell_caption(c) != c for c in base)  # the fixture has such words
     for c in base:
         assert D.respell_caption(c) in texts and D.mirror_caption(c) in texts
         assert D.respell_caption(D.mirror_caption(c)) in texts
+
+
+def test_respelling_reaches_the_training_splits_only(corpus):
+    """``respell_captions`` respells training captions (flows and evaluators); validation
+    keeps the corpus's own words, so val losses stay comparable between runs."""
+    from umf.config import small_config
+    from umf.train.evaluator_stage import evaluator_loaders
+    from umf.train.run import _loaders
+
+    cfg = small_config()
+    t = dataclasses.replace(cfg.train_pflow, respell_captions=True, num_workers=0)
+    train, val, _ = _loaders("pflow", corpus, cfg, t, progress=False)
+    assert [dl.dataset.respell for dl in train.loaders] == [True, True]
+    assert [dl.dataset.respell for dl in val.loaders] == [False, False]
+    plain = dataclasses.replace(t, respell_captions=False)
+    assert not any(dl.dataset.respell for dl in _loaders("pflow", corpus, cfg, plain,
+                                                         progress=False)[0].loaders)  # fmt: skip
+    for kind in ("single", "interaction"):
+        train, val = evaluator_loaders(corpus, kind, t, 60, 4)
+        assert train.dataset.respell and not val.dataset.dataset.respell

@@ -20,7 +20,7 @@ InterGen's, which call a foot planted below about 1 m/s): the walks and the run 
 repository's Bandai sample keep at least 93 % of their travel (`tests/test_anchoring.py`).
 The slides are smoothed over a few frames before they are summed: switched on and off
 frame by frame, the correction would jolt the body at every contact change; smoothed, the
-delivered scenes' jerk stays below the raw output's (336 against 363 m/s³ for the test
+delivered scenes' jerk stays below the raw output's (356 against 383 m/s³ for the test
 pairs in the report below).
 
 Measured on the bundled model (`umf eval`, all 300 test pairs and 200 groups, after

@@ -111,9 +111,9 @@ class SFlowConfig:
     context_positional: bool = False
     steps: int = 10
     # steps when the scene has two people; None = ``steps``. The bundled model sets 4,
-    # chosen on the val split for pairs (fewer steps: lower FID, worse placement), while
-    # groups of 3+ lose relation checks below 10 (results/umf-small-bandai-20261126c;
-    # results/umf-small-bandai-h200-20261126b, sflow-3-steps)
+    # chosen on the val split for pairs (fewer steps: lower FID, worse placement;
+    # results/umf-small-bandai-20261126c), while groups of 3+ lost relation checks at 3
+    # steps with the previous S-Flow (results/umf-small-bandai-h200-20261126b, sflow-3-steps)
     pair_steps: int | None = None
     solver: str = "euler"
     guidance: float = 3.0

@@ -27,7 +27,7 @@ from umf.validation import (
 from umf.writer import clean_stale, scene_targets, write_scene_files
 
 SFLOW_STEPS_HELP = (
-    "S-Flow steps per added person, 1-200 (default: the model's; bundled: 3 for two people, "
+    "S-Flow steps per added person, 1-200 (default: the model's; bundled: 4 for two people, "
     "else 10)."
 )
 

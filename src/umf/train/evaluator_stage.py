@@ -152,7 +152,7 @@ def train_evaluators(
         t = TrainConfig(**{**vars(t), "max_steps": max_steps})
     source, sizes = build_text_source(ecfg, corpus.root / "text-cache")
     if isinstance(source, TextFeatureCache):  # frozen token states: encode every caption once
-        captions = corpus_captions(corpus)
+        captions = corpus_captions(corpus, respell=t.respell_captions)
         for i in range(0, len(captions), 256):
             source.encode(captions[i : i + 256])
     out: dict[str, dict[str, Any]] = {}

@@ -212,9 +212,11 @@ def best_or_last(stage_dir: Path) -> Path | None:
     return None
 
 
-def corpus_captions(corpus: Corpus) -> list[str]:
-    """Every caption training can ask for: clips, scenes, their mirrored and respelled
-    forms, and ''."""
+def corpus_captions(corpus: Corpus, respell: bool = False) -> list[str]:
+    """Every caption training can ask for: clips, scenes, their mirrored forms (and with
+    ``respell`` their respelled forms: ``train_*.respell_captions``), and ''. Respelled
+    forms only when asked, so a text cache built without them still serves every run
+    that does not respell."""
     from umf.train.datasets import mirror_caption, respell_caption
 
     texts = {""}
@@ -224,7 +226,8 @@ def corpus_captions(corpus: Corpus) -> list[str]:
         for r in recipes:
             texts.update(r["captions"])
     texts.update([mirror_caption(t) for t in texts])
-    texts.update([respell_caption(t) for t in texts])
+    if respell:
+        texts.update([respell_caption(t) for t in texts])
     return sorted(texts)
 
 
@@ -250,7 +253,8 @@ def text_cache(cfg: UMFConfig, corpus: Corpus, progress: bool = True):
             raise UMFError(f"{cache_dir}: text cache of {enc.name!r}, the config asks for "
                            f"{cfg.text.encoder!r}") from None  # fmt: skip
     cache = TextFeatureCache(enc, cache_dir=cache_dir)
-    texts = corpus_captions(corpus)
+    stages = (cfg.train_vae, cfg.train_pflow, cfg.train_sflow, cfg.train_evaluator)
+    texts = corpus_captions(corpus, respell=any(t.respell_captions for t in stages))
     chunk = 256
     for i in tqdm(range(0, len(texts), chunk), desc="text features", disable=not progress):
         cache.encode(texts[i : i + chunk])
