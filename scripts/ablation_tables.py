@@ -68,16 +68,18 @@ def stage_seconds(run: Path, stage: str) -> float | None:
     return max(times) if times else None
 
 
-def vae_mpjpe(run: Path, name: str = "mpjpe_m") -> float | None:
-    """The VAE's best validation MPJPE (m) on the corpus's validation split: global
-    (``mpjpe_m``, dominated by where the body is) or root-relative (``mpjpe_pose_m``)."""
-    path = run / "vae" / "metrics.csv"
-    if not path.exists():
-        return None
+def vae_mpjpe(run: Path | None) -> tuple[float | None, float | None]:
+    """The VAE's best validation MPJPE (m) on the corpus's validation split, global
+    (``mpjpe_m``, dominated by where the body is) and root-relative (``mpjpe_pose_m``)."""
+    path = None if run is None else run / "vae" / "metrics.csv"
+    if path is None or not path.exists():
+        return None, None
+    best: dict[str, float] = {}
     with path.open() as f:
-        vals = [float(r["value"]) for r in csv.DictReader(f)
-                if r["split"] == "val" and r["name"] == name]  # fmt: skip
-    return min(vals) if vals else None
+        for r in csv.DictReader(f):
+            if r["split"] == "val" and r["name"] in ("mpjpe_m", "mpjpe_pose_m"):
+                best[r["name"]] = min(float(r["value"]), best.get(r["name"], float("inf")))
+    return best.get("mpjpe_m"), best.get("mpjpe_pose_m")
 
 
 def run_dir(source: dict[str, Any], runs: dict[str, Path]) -> Path | None:
@@ -148,8 +150,7 @@ def rows_for(
             "—" if secs is None else ("0 (same weights)" if secs == 0 else f"{secs / 60:.1f}"),
         ]  # fmt: skip
         if key == "latent":
-            mp = vae_mpjpe(run) if run is not None else None
-            pose = vae_mpjpe(run, "mpjpe_pose_m") if run is not None else None
+            mp, pose = vae_mpjpe(run)
             row[2:2] = ["—" if mp is None else f"{mp:.3f}",
                         "—" if pose is None else f"{100 * pose:.1f}"]  # fmt: skip
         rows.append(row)

@@ -114,9 +114,10 @@ def _pack_text(corpus: Path, out: Path, int8: bool = False) -> None:
         return
     lookup = TextFeatureCache(CachedTextEncoder.load(cache), cache)
     rel, meta, tokens, pooled, lengths = [], [], [], [], []
-    needed = corpus_captions(Corpus.load(corpus))
+    loaded = Corpus.load(corpus)
+    needed = corpus_captions(loaded)
     # respelled captions (train_*.respell_captions) travel when a run here encoded them
-    extra = sorted(set(corpus_captions(Corpus.load(corpus), respell=True)) - set(needed))
+    extra = sorted(set(corpus_captions(loaded, respell=True)) - set(needed))
     for text in needed + [t for t in extra if lookup.path_of(t).exists()]:
         path = lookup.path_of(text)
         if not path.exists():

@@ -30,7 +30,7 @@ def median_row(people: Sequence[np.ndarray], stats: Sequence[str] = STATS) -> li
 
 def real_people(corpus, label: str) -> list[np.ndarray]:
     """Joints of every single-person clip of a content label, train, val and test pooled."""
-    return MS.real_joints_by_label(corpus, labels=None).get(label, [])
+    return MS.real_joints_by_label(corpus, labels=(label,)).get(label, [])
 
 
 def format_rows(rows: Sequence[tuple[str, int, list[float]]], stats=STATS) -> str:

@@ -158,14 +158,14 @@ def median_statistics(people: Sequence[Array], stats: Sequence[str],
 
 
 def real_clips_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),
-                        labels: Collection[str] | None = LABELS) -> dict:  # fmt: skip
-    """The corpus's single-person clips of each content label in ``labels`` (None: every
-    label the corpus has), in corpus order."""
+                        labels: Collection[str] = LABELS) -> dict:  # fmt: skip
+    """The corpus's single-person clips of each content label in ``labels`` (any labels
+    of the corpus, not only the checked ones), in corpus order."""
     out: dict[str, list] = {}
     for split in splits:
         for clip in corpus.split_clips(split):
             label = clip.meta.get("content")
-            if clip.num_people == 1 and label is not None and (labels is None or label in labels):
+            if clip.num_people == 1 and label in labels:
                 out.setdefault(label, []).append(clip)
     return out
 
@@ -174,7 +174,7 @@ def real_joints_by_label(
     corpus,
     splits: Sequence[str] = ("train", "val", "test"),
     max_frames: int = 300,
-    labels: Collection[str] | None = LABELS,
+    labels: Collection[str] = LABELS,
 ) -> dict[str, list[Array]]:
     """Joints (T, 22, 3) of the corpus's single-person clips of each label in ``labels``
     (at most ``max_frames`` frames each, the longest motion the pipeline makes)."""

@@ -99,17 +99,16 @@ class Shuffled(Dataset):
 def evaluator_loaders(corpus: Corpus, kind: str, t: TrainConfig, max_frames: int, group: int):
     """(train, val) loaders of raw features: crops for training, whole items for validation."""
 
-    def dataset(split: str, lo: int, hi: int, mirror: bool):
-        respell = mirror and t.respell_captions  # mirror: the training split
+    def dataset(split: str, lo: int, hi: int):
+        train = split == "train"  # only training crops are mirrored and respelled
+        aug = dict(mirror=train, respell=train and t.respell_captions, seed=t.seed)
         if kind == "interaction":
-            return SceneDataset(corpus, split, None, lo, hi, mirror=mirror, seed=t.seed,
-                                max_people=2, respell=respell)  # fmt: skip
-        return SingleMotionDataset(corpus, split, None, lo, hi, mirror=mirror, seed=t.seed,
-                                   respell=respell)  # fmt: skip
+            return SceneDataset(corpus, split, None, lo, hi, max_people=2, **aug)
+        return SingleMotionDataset(corpus, split, None, lo, hi, **aug)
 
     hi = min(t.max_frames, max_frames)
-    train_ds = dataset("train", min(t.min_frames, hi), hi, True)
-    val_ds = Shuffled(dataset("val", max_frames, max_frames, False), seed=t.seed)
+    train_ds = dataset("train", min(t.min_frames, hi), hi)
+    val_ds = Shuffled(dataset("val", max_frames, max_frames), seed=t.seed)
     train = make_loader(train_ds, t.batch_size, shuffle=True, num_workers=t.num_workers,
                         seed=t.seed)  # fmt: skip
     val = make_loader(val_ds, group, shuffle=False, num_workers=t.num_workers)
