@@ -37,8 +37,8 @@ def main() -> None:
             return [s.joints[0] for s in scenes]  # fit=False: joints are the raw positions
 
         rows = MS.check_labels(real, generate, samples=args.samples)
-        kind = "delivered" if args.delivered else "raw"
-        print(f"## {path} ({kind}): {sum(MS.label_passes(rows).values())}/{len(MS.label_passes(rows))}")
+        kind, passes = ("delivered" if args.delivered else "raw"), MS.label_passes(rows)
+        print(f"## {path} ({kind}): {sum(passes.values())}/{len(passes)}")
         print(MS.format_checks(rows), flush=True)
 
 
