@@ -1,0 +1,85 @@
+"""How far the VAE moves a real person's pelvis: real test clips against their reconstructions.
+
+People who should stand still (waving, raising hands, bowing) drift across the floor in
+generated motion. This script asks whether the drift comes from the VAE: it encodes and
+decodes the real single-person test clips of each label (posterior mean, then the
+pipeline's position fusion at the model's ``root_fusion`` or at the values given), and
+prints the medians over clips of
+
+* ``path``: the pelvis's horizontal path length over the duration (m/s; what
+  ``umf.eval.motion_stats``'s ``pelvis_speed`` measures, jitter included),
+* ``net``: the straight-line distance from the first to the last frame over the duration
+  (m/s; drift, no jitter),
+* ``ankles``: root-relative ankle speed (m/s; the legs' motion).
+
+    python scripts/vae_root_drift.py [MODEL_DIR] [--labels wave-right-hand walk ...]
+        [--root-fusion 0.005 0.05] [--corpus out/corpus]
+"""
+
+from __future__ import annotations
+
+import argparse
+import dataclasses
+
+import numpy as np
+import torch
+
+from umf.data.corpus import Corpus
+from umf.eval.motion_stats import PELVIS, motion_statistics
+from umf.eval.protocol import corpus_items
+from umf.eval.reconstruction import reconstruct
+from umf.pipeline import UMFPipeline
+from umf.representation import features_to_joints
+
+LABELS = ("raise-up-both-hands", "wave-right-hand", "bow", "walk", "run")
+
+
+def drift(features: np.ndarray, fps: float = 30.0) -> tuple[float, float, float]:
+    """(path speed, net speed, ankle speed) of one person's raw features (T, 262)."""
+    j = features_to_joints(torch.as_tensor(np.asarray(features)).float()).numpy()
+    pelvis = j[:, PELVIS, [0, 2]].astype(np.float64)
+    dur = max(len(j) - 1, 1) / fps
+    path = np.linalg.norm(np.diff(pelvis, axis=0), axis=-1).sum() / dur
+    net = np.linalg.norm(pelvis[-1] - pelvis[0]) / dur
+    return float(path), float(net), motion_statistics(j, fps)["ankle_energy"]
+
+
+def item_label(item) -> str | None:
+    key = item.key[0] if isinstance(item.key, tuple) else item.key
+    return item.meta.get("content") or key
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", nargs="?", default="src/umf/assets/model")
+    ap.add_argument("--corpus", default="out/corpus")
+    ap.add_argument("--labels", nargs="+", default=list(LABELS))
+    ap.add_argument("--root-fusion", nargs="+", type=float, default=None)
+    ap.add_argument("--max-clips", type=int, default=40)
+    args = ap.parse_args()
+    torch.set_num_threads(2)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    items = corpus_items(Corpus.load(args.corpus), "test", "single")
+    weights = args.root_fusion or [pipe.vae.cfg.root_fusion]
+    print("| label | clips | source | path (m/s) | net (m/s) | ankles (m/s) |")
+    print("|---|---:|---|---:|---:|---:|")
+    for label in args.labels:
+        real = [it.features[0][: pipe.config.vae.max_frames] for it in items
+                if item_label(it) == label][: args.max_clips]  # fmt: skip
+        if not real:
+            print(f"| {label} | 0 | no test clips | | | |")
+            continue
+        rows = [("real", real)]
+        for w in weights:
+            vae, cfg = pipe.vae, pipe.vae.cfg
+            vae.cfg = dataclasses.replace(cfg, root_fusion=w)
+            rows.append((f"VAE, root_fusion {w:g}", reconstruct(vae, pipe.normalizer, real)))
+            vae.cfg = cfg
+        for name, clips in rows:
+            med = np.median(np.array([drift(f) for f in clips]), axis=0)
+            print(f"| {label} | {len(clips)} | {name} | {med[0]:.3f} | {med[1]:.3f} | "
+                  f"{med[2]:.3f} |", flush=True)  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
