@@ -12,8 +12,12 @@ prints the medians over clips of
   (m/s; drift, no jitter),
 * ``ankles``: root-relative ankle speed (m/s; the legs' motion).
 
+``--delivered`` adds each source as the pipeline would hand it out (planted feet anchored,
+:func:`umf.pipeline.delivered_joints`, with the clip's own contact labels): how much of the
+drift, and of the travel, survives anchoring.
+
     python scripts/vae_root_drift.py [MODEL_DIR] [--labels wave-right-hand walk ...]
-        [--root-fusion 0.005 0.05] [--corpus out/corpus]
+        [--root-fusion 0.005 0.05] [--delivered] [--corpus out/corpus]
 """
 
 from __future__ import annotations
@@ -28,15 +32,20 @@ from umf.data.corpus import Corpus
 from umf.eval.motion_stats import PELVIS, motion_statistics
 from umf.eval.protocol import corpus_items
 from umf.eval.reconstruction import reconstruct
-from umf.pipeline import UMFPipeline
-from umf.representation import features_to_joints
+from umf.pipeline import UMFPipeline, delivered_joints
+from umf.representation import CONTACT, features_to_joints
 
 LABELS = ("raise-up-both-hands", "wave-right-hand", "bow", "walk", "run")
 
 
-def drift(features: np.ndarray, fps: float = 30.0) -> tuple[float, float, float]:
-    """(path speed, net speed, ankle speed) of one person's raw features (T, 262)."""
-    j = features_to_joints(torch.as_tensor(np.asarray(features)).float()).numpy()
+def drift(features: np.ndarray, fps: float = 30.0, delivered: bool = False
+          ) -> tuple[float, float, float]:  # fmt: skip
+    """(path speed, net speed, ankle speed) of one person's raw features (T, 262), as
+    decoded or (``delivered``) with its planted feet anchored."""
+    f = np.asarray(features)
+    j = features_to_joints(torch.as_tensor(f).float()).numpy()
+    if delivered:
+        j = delivered_joints(j[None], f[None, :, CONTACT])[0]
     pelvis = j[:, PELVIS, [0, 2]].astype(np.float64)
     dur = max(len(j) - 1, 1) / fps
     path = np.linalg.norm(np.diff(pelvis, axis=0), axis=-1).sum() / dur
@@ -56,6 +65,7 @@ def main() -> None:
     ap.add_argument("--labels", nargs="+", default=list(LABELS))
     ap.add_argument("--root-fusion", nargs="+", type=float, default=None)
     ap.add_argument("--max-clips", type=int, default=40)
+    ap.add_argument("--delivered", action="store_true", help="also as the pipeline delivers")
     args = ap.parse_args()
     torch.set_num_threads(2)
     pipe = UMFPipeline.from_pretrained(args.model)
@@ -76,9 +86,11 @@ def main() -> None:
             rows.append((f"VAE, root_fusion {w:g}", reconstruct(vae, pipe.normalizer, real)))
             vae.cfg = cfg
         for name, clips in rows:
-            med = np.median(np.array([drift(f) for f in clips]), axis=0)
-            print(f"| {label} | {len(clips)} | {name} | {med[0]:.3f} | {med[1]:.3f} | "
-                  f"{med[2]:.3f} |", flush=True)  # fmt: skip
+            for delivered in (False, True) if args.delivered else (False,):
+                med = np.median(np.array([drift(f, delivered=delivered) for f in clips]), axis=0)
+                shown = f"{name}, delivered" if delivered else name
+                print(f"| {label} | {len(clips)} | {shown} | {med[0]:.3f} | {med[1]:.3f} | "
+                      f"{med[2]:.3f} |", flush=True)  # fmt: skip
 
 
 if __name__ == "__main__":
