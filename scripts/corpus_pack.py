@@ -11,10 +11,20 @@ the cache's ``encoder.json`` so training runs without the encoder installed.
     python scripts/corpus_pack.py pack out/corpus .gpu coarse   # 2 mm, 1e-3, int8 text
     python scripts/corpus_pack.py unpack .gpu out/corpus            # on the other machine
     python scripts/corpus_pack.py check out/corpus out/unpacked     # largest differences
+
+When the working tree and a pack together exceed what one call may carry, ``split`` cuts
+the pack's files into N parts of about equal size, part k in ``DST/partk`` (the first call
+carries part1 and stashes it on the machine, the next carries part2, ...), and ``join``
+puts them back together, checking each file's SHA-256 against the manifest every part
+holds:
+
+    python scripts/corpus_pack.py split .gpu/all .gpu 2             # .gpu/part1, .gpu/part2
+    python scripts/corpus_pack.py join .gpu/text /tmp/stash .gpu/part2   # any order of parts
 """
 
 from __future__ import annotations
 
+import hashlib
 import json
 import lzma
 import sys
@@ -192,6 +202,54 @@ def _unpack_text(packed: Path, cache: Path) -> None:
         (cache / "encoder.json").write_text(str(z["encoder"]))
 
 
+SPLIT_MANIFEST = "parts.json"
+
+
+def split(packed: Path, out: Path, parts: int) -> list[Path]:
+    """Cut every file of ``packed`` into ``parts`` byte ranges: part k (1-based) holds range
+    k of each file as ``NAME.k`` and the manifest (sizes and SHA-256 of the whole files)."""
+    if parts < 1:
+        raise ValueError("split needs at least one part")
+    files = sorted(f for f in packed.iterdir() if f.is_file())
+    manifest = {"parts": parts, "files": {}}
+    dirs = [out / f"part{k}" for k in range(1, parts + 1)]
+    for d in dirs:
+        d.mkdir(parents=True, exist_ok=True)
+    for f in files:
+        data = f.read_bytes()
+        manifest["files"][f.name] = {"size": len(data), "sha256": hashlib.sha256(data).hexdigest()}
+        bounds = [len(data) * k // parts for k in range(parts + 1)]
+        for k, d in enumerate(dirs):
+            (d / f"{f.name}.{k + 1}").write_bytes(data[bounds[k] : bounds[k + 1]])
+    for d in dirs:
+        (d / SPLIT_MANIFEST).write_text(json.dumps(manifest, indent=1))
+    return dirs
+
+
+def join(out: Path, *part_dirs: Path) -> None:
+    """Reassemble the files that :func:`split` cut, from part directories in any order."""
+    found: dict[str, Path] = {}
+    manifest = None
+    for d in part_dirs:
+        for f in d.iterdir():
+            if f.name == SPLIT_MANIFEST:
+                manifest = json.loads(f.read_text())
+            else:
+                found[f.name] = f
+    if manifest is None:
+        raise SystemExit(f"no {SPLIT_MANIFEST} in {', '.join(map(str, part_dirs))}")
+    out.mkdir(parents=True, exist_ok=True)
+    for name, info in manifest["files"].items():
+        pieces = [found.get(f"{name}.{k}") for k in range(1, manifest["parts"] + 1)]
+        missing = [f"{name}.{k}" for k, p in enumerate(pieces, 1) if p is None]
+        if missing:
+            raise SystemExit(f"missing part(s) {', '.join(missing)}")
+        data = b"".join(p.read_bytes() for p in pieces)
+        if len(data) != info["size"] or hashlib.sha256(data).hexdigest() != info["sha256"]:
+            raise SystemExit(f"{name}: the joined parts do not match the manifest")
+        (out / name).write_bytes(data)
+
+
 def check(a: Path, b: Path) -> None:
     with np.load(a / "clips.npz") as za, np.load(b / "clips.npz") as zb:
         for k in ("joints", "rot6d"):
@@ -200,6 +258,12 @@ def check(a: Path, b: Path) -> None:
 
 if __name__ == "__main__":
     cmd, src, dst = sys.argv[1:4]
+    if cmd == "split":
+        split(Path(src), Path(dst), int(sys.argv[4]) if sys.argv[4:] else 2)
+        sys.exit()
+    if cmd == "join":
+        join(Path(src), *map(Path, sys.argv[3:]))
+        sys.exit()
     if sys.argv[4:] not in ([], ["coarse"]) or (sys.argv[4:] and cmd != "pack"):
         raise SystemExit(f"unknown arguments {sys.argv[4:]}: only `pack SRC DST coarse` takes one")
     if cmd == "pack" and sys.argv[4:] == ["coarse"]:  # when the carry cap is tight

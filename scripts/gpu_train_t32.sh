@@ -19,6 +19,13 @@
 # batch, EMA, latent passes, guidance 2) apply in both cases.
 # Packs: python scripts/corpus_pack.py pack out/corpus .gpu/pack coarse (then text.npz, int8
 # features: 14 MB, to .gpu/text).
+# When the working tree plus a pack exceed one call's carry (64 MiB; the tree alone is 43 MB,
+# the coarse motion pack 26 MB), split the packs into parts and stash all but the last on the
+# warm machine: `python scripts/corpus_pack.py split .gpu/all .gpu 2`, then
+#   call 1 (carry .gpu/part1):  scripts/gpu_train_t32.sh stash
+#   call 2 (carry .gpu/part2):  scripts/gpu_train_t32.sh flows BUDGET_S   # (or vae / motion)
+# A phase that unpacks joins the stashed and carried parts first (SHA-256 checked) and
+# unpacks them instead of .gpu/pack or .gpu/text (results/umf-small-bandai-h200-20261127).
 set -euo pipefail
 phase=${1:-} budget=${2:-}
 export PYTHONPATH=$PWD/src PYTHONUNBUFFERED=1 RUNS=${RUNS:-$PWD/out/runs} CORPUS=${CORPUS:-out/corpus}
@@ -41,14 +48,28 @@ OPTS=(
   --set train_pflow.ckpt_every=400 --set train_sflow.ckpt_every=400
 )
 OPTS+=(${EXTRA:-})  # dry runs: fewer steps
+STASH=${STASH:-/tmp/umf-stash}
+unpack() {  # the carried pack ($1), or the stashed and carried parts joined
+  shopt -s nullglob
+  local parts=("$STASH"/part* .gpu/part*)
+  shopt -u nullglob
+  if [ ${#parts[@]} -gt 0 ]; then
+    python scripts/corpus_pack.py join .gpu/joined "${parts[@]}"
+    python scripts/corpus_pack.py unpack .gpu/joined "$CORPUS"
+  else
+    python scripts/corpus_pack.py unpack "$1" "$CORPUS"
+  fi
+}
 case $phase in
+  stash)
+    mkdir -p "$STASH" && cp -r .gpu/part* "$STASH"/ && ls -l "$STASH"/* ;;
   motion)
-    python scripts/corpus_pack.py unpack .gpu/pack "$CORPUS" ;;
+    unpack .gpu/pack ;;
   vae)
-    python scripts/corpus_pack.py unpack .gpu/pack "$CORPUS"
+    unpack .gpu/pack
     VAE_WORKERS=${VAE_WORKERS:-12} python scripts/gpu_flows_train.py "$budget" --vae-only "${OPTS[@]}" ;;
   flows)
-    python scripts/corpus_pack.py unpack .gpu/text "$CORPUS"
+    unpack .gpu/text
     rc=0
     if [ -n "${VAE_MODEL:-}" ]; then vae=(); export MODEL=$VAE_MODEL; else vae=(--vae); fi
     PFLOW_WORKERS=${PFLOW_WORKERS:-9} SFLOW_WORKERS=${SFLOW_WORKERS:-5} \
@@ -58,5 +79,5 @@ case $phase in
     [ ${#logs[@]} -eq 0 ] || tar czf training.tgz --remove-files "${logs[@]}" || true
     rm -f best-*.safetensors
     exit $rc ;;
-  *) echo "usage: $0 motion|vae|flows BUDGET_S" >&2; exit 2 ;;
+  *) echo "usage: $0 stash|motion|vae|flows BUDGET_S" >&2; exit 2 ;;
 esac
