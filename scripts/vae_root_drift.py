@@ -2,9 +2,9 @@
 
 People who should stand still (waving, raising hands, bowing) drift across the floor in
 generated motion. This script asks whether the drift comes from the VAE: it encodes and
-decodes the real single-person test clips of each label (posterior mean, then the
-pipeline's position fusion at the model's ``root_fusion`` or at the values given), and
-prints the medians over clips of
+decodes the real single-person clips of each label in a split (test unless ``--split``;
+posterior mean, then the pipeline's position fusion at the model's ``root_fusion`` or at
+the values given), and prints the medians over clips of
 
 * ``path``: the pelvis's horizontal path length over the duration (m/s; what
   ``umf.eval.motion_stats``'s ``pelvis_speed`` measures, jitter included),
@@ -17,7 +17,7 @@ prints the medians over clips of
 drift, and of the travel, survives anchoring.
 
     python scripts/vae_root_drift.py [MODEL_DIR] [--labels wave-right-hand walk ...]
-        [--root-fusion 0.005 0.05] [--delivered] [--corpus out/corpus]
+        [--root-fusion 0.005 0.05] [--delivered] [--split test] [--corpus out/corpus]
 """
 
 from __future__ import annotations
@@ -65,11 +65,12 @@ def main() -> None:
     ap.add_argument("--labels", nargs="+", default=list(LABELS))
     ap.add_argument("--root-fusion", nargs="+", type=float, default=None)
     ap.add_argument("--max-clips", type=int, default=40)
+    ap.add_argument("--split", default="test", help="test, val or train (seen in training)")
     ap.add_argument("--delivered", action="store_true", help="also as the pipeline delivers")
     args = ap.parse_args()
     torch.set_num_threads(2)
     pipe = UMFPipeline.from_pretrained(args.model)
-    items = corpus_items(Corpus.load(args.corpus), "test", "single")
+    items = corpus_items(Corpus.load(args.corpus), args.split, "single")
     weights = args.root_fusion or [pipe.vae.cfg.root_fusion]
     print("| label | clips | source | path (m/s) | net (m/s) | ankles (m/s) |")
     print("|---|---:|---|---:|---:|---:|")
