@@ -24,8 +24,8 @@
 # warm machine: `python scripts/corpus_pack.py split .gpu/all .gpu 2`, then
 #   call 1 (carry .gpu/part1):  scripts/gpu_train_t32.sh stash
 #   call 2 (carry .gpu/part2):  scripts/gpu_train_t32.sh flows BUDGET_S   # (or vae / motion)
-# A phase that unpacks joins the stashed and carried parts first (SHA-256 checked) and
-# unpacks them instead of .gpu/pack or .gpu/text (results/umf-small-bandai-h200-20261127).
+# A phase that carries a part joins it with the stashed ones (SHA-256 checked) and unpacks
+# them instead of .gpu/pack or .gpu/text (results/umf-small-bandai-h200-20261127).
 set -euo pipefail
 phase=${1:-} budget=${2:-}
 export PYTHONPATH=$PWD/src PYTHONUNBUFFERED=1 RUNS=${RUNS:-$PWD/out/runs} CORPUS=${CORPUS:-out/corpus}
@@ -49,12 +49,12 @@ OPTS=(
 )
 OPTS+=(${EXTRA:-})  # dry runs: fewer steps
 STASH=${STASH:-/tmp/umf-stash}
-unpack() {  # the carried pack ($1), or the stashed and carried parts joined
+unpack() {  # the carried pack ($1), or, when this call carries a part, it and the stashed ones
   shopt -s nullglob
-  local parts=("$STASH"/part* .gpu/part*)
+  local carried=(.gpu/part*) stashed=("$STASH"/part*)
   shopt -u nullglob
-  if [ ${#parts[@]} -gt 0 ]; then
-    python scripts/corpus_pack.py join .gpu/joined "${parts[@]}"
+  if [ ${#carried[@]} -gt 0 ]; then  # (a stash left by an earlier run alone is not used)
+    python scripts/corpus_pack.py join .gpu/joined ${stashed[@]+"${stashed[@]}"} "${carried[@]}"
     python scripts/corpus_pack.py unpack .gpu/joined "$CORPUS"
   else
     python scripts/corpus_pack.py unpack "$1" "$CORPUS"
