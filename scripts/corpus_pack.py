@@ -19,7 +19,7 @@ puts them back together, checking each file's SHA-256 against the manifest every
 holds:
 
     python scripts/corpus_pack.py split .gpu/all .gpu 2             # .gpu/part1, .gpu/part2
-    python scripts/corpus_pack.py join .gpu/text /tmp/stash .gpu/part2   # any order of parts
+    python scripts/corpus_pack.py join .gpu/text /tmp/stash/part1 .gpu/part2   # any order
 """
 
 from __future__ import annotations
@@ -207,12 +207,16 @@ SPLIT_MANIFEST = "parts.json"
 
 def split(packed: Path, out: Path, parts: int) -> list[Path]:
     """Cut every file of ``packed`` into ``parts`` byte ranges: part k (1-based) holds range
-    k of each file as ``NAME.k`` and the manifest (sizes and SHA-256 of the whole files)."""
+    k of each file as ``NAME.k`` and the manifest (sizes and SHA-256 of the whole files).
+    The part directories must be new or empty (old parts would mix with the new ones)."""
     if parts < 1:
-        raise ValueError("split needs at least one part")
+        raise SystemExit("split needs at least one part")
     files = sorted(f for f in packed.iterdir() if f.is_file())
-    manifest = {"parts": parts, "files": {}}
     dirs = [out / f"part{k}" for k in range(1, parts + 1)]
+    used = [d for d in dirs if d.exists() and any(d.iterdir())]
+    if used:
+        raise SystemExit(f"{used[0]} is not empty: remove the old parts first")
+    manifest = {"parts": parts, "files": {}}
     for d in dirs:
         d.mkdir(parents=True, exist_ok=True)
     for f in files:
@@ -227,18 +231,23 @@ def split(packed: Path, out: Path, parts: int) -> list[Path]:
 
 
 def join(out: Path, *part_dirs: Path) -> None:
-    """Reassemble the files that :func:`split` cut, from part directories in any order."""
+    """Reassemble the files that :func:`split` cut, from part directories in any order;
+    every file is checked against the manifest before any is written."""
+    if not part_dirs:
+        raise SystemExit("join needs the part directories")
     found: dict[str, Path] = {}
-    manifest = None
+    manifests = []
     for d in part_dirs:
         for f in d.iterdir():
             if f.name == SPLIT_MANIFEST:
-                manifest = json.loads(f.read_text())
+                manifests.append(json.loads(f.read_text()))
             else:
                 found[f.name] = f
-    if manifest is None:
+    if not manifests:
         raise SystemExit(f"no {SPLIT_MANIFEST} in {', '.join(map(str, part_dirs))}")
-    out.mkdir(parents=True, exist_ok=True)
+    if any(m != manifests[0] for m in manifests):
+        raise SystemExit("the parts come from different splits (their manifests differ)")
+    manifest, joined = manifests[0], {}
     for name, info in manifest["files"].items():
         pieces = [found.get(f"{name}.{k}") for k in range(1, manifest["parts"] + 1)]
         missing = [f"{name}.{k}" for k, p in enumerate(pieces, 1) if p is None]
@@ -247,6 +256,9 @@ def join(out: Path, *part_dirs: Path) -> None:
         data = b"".join(p.read_bytes() for p in pieces)
         if len(data) != info["size"] or hashlib.sha256(data).hexdigest() != info["sha256"]:
             raise SystemExit(f"{name}: the joined parts do not match the manifest")
+        joined[name] = data
+    out.mkdir(parents=True, exist_ok=True)
+    for name, data in joined.items():
         (out / name).write_bytes(data)
 
 
@@ -257,12 +269,17 @@ def check(a: Path, b: Path) -> None:
 
 
 if __name__ == "__main__":
+    if len(sys.argv) < 4:
+        raise SystemExit("usage: corpus_pack.py pack|unpack|check|split SRC DST [...] | "
+                         "join OUT PART_DIR...")  # fmt: skip
+    if sys.argv[1] == "join":
+        join(Path(sys.argv[2]), *map(Path, sys.argv[3:]))
+        sys.exit()
     cmd, src, dst = sys.argv[1:4]
     if cmd == "split":
+        if len(sys.argv) > 5 or not all(a.isdigit() for a in sys.argv[4:]):
+            raise SystemExit("usage: corpus_pack.py split PACKED OUT [PARTS]")
         split(Path(src), Path(dst), int(sys.argv[4]) if sys.argv[4:] else 2)
-        sys.exit()
-    if cmd == "join":
-        join(Path(src), *map(Path, sys.argv[3:]))
         sys.exit()
     if sys.argv[4:] not in ([], ["coarse"]) or (sys.argv[4:] and cmd != "pack"):
         raise SystemExit(f"unknown arguments {sys.argv[4:]}: only `pack SRC DST coarse` takes one")

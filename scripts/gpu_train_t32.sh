@@ -53,9 +53,12 @@ unpack() {  # the carried pack ($1), or, when this call carries a part, it and t
   shopt -s nullglob
   local carried=(.gpu/part*) stashed=("$STASH"/part*)
   shopt -u nullglob
-  if [ ${#carried[@]} -gt 0 ]; then  # (a stash left by an earlier run alone is not used)
+  if [ ${#carried[@]} -gt 0 ]; then
+    rm -rf .gpu/joined
     python scripts/corpus_pack.py join .gpu/joined ${stashed[@]+"${stashed[@]}"} "${carried[@]}"
     python scripts/corpus_pack.py unpack .gpu/joined "$CORPUS"
+    # used once: a later call on this warm machine that carries no part must not find them
+    rm -rf "$STASH" "${carried[@]}" .gpu/joined
   else
     python scripts/corpus_pack.py unpack "$1" "$CORPUS"
   fi

@@ -6,7 +6,8 @@ as ``umf eval``'s section 5 without the rest of the evaluation. ``--delivered`` 
 people as the default pipeline hands them out instead (feet anchored, bodies fitted: the
 "delivered" rows of ``umf eval``).
 
-    python scripts/motion_stats_report.py MODEL_DIR [MODEL_DIR ...] [--corpus out/corpus]
+    python scripts/motion_stats_report.py MODEL_DIR [MODEL_DIR ...] [--delivered]
+        [--corpus out/corpus]
 """
 
 from __future__ import annotations

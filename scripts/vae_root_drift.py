@@ -54,8 +54,8 @@ def drift(features: np.ndarray, fps: float = 30.0, delivered: bool = False
 
 
 def item_label(item) -> str | None:
-    key = item.key[0] if isinstance(item.key, tuple) else item.key
-    return item.meta.get("content") or key
+    """A single-person item's content label (its key is (label, style))."""
+    return item.key[0] if isinstance(item.key, tuple) else item.key
 
 
 def main() -> None:
@@ -78,7 +78,7 @@ def main() -> None:
         real = [it.features[0][: pipe.config.vae.max_frames] for it in items
                 if item_label(it) == label][: args.max_clips]  # fmt: skip
         if not real:
-            print(f"| {label} | 0 | no test clips | | | |")
+            print(f"| {label} | 0 | no {args.split} clips | | | |")
             continue
         rows = [("real", real)]
         for w in weights:

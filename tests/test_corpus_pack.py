@@ -120,3 +120,18 @@ def test_join_refuses_a_missing_or_damaged_part(tmp_path):
     piece.write_bytes(b"x" + piece.read_bytes()[1:])
     with pytest.raises(SystemExit, match="do not match"):
         cp.join(tmp_path / "joined", one, two)
+
+
+def test_split_refuses_old_parts_and_join_refuses_mixed_splits(tmp_path):
+    cp = load_script("corpus_pack")
+    packed = tmp_path / "packed"
+    packed.mkdir()
+    (packed / "motion.npz").write_bytes(b"first pack")
+    first = cp.split(packed, tmp_path / "a", 2)
+    with pytest.raises(SystemExit, match="not empty"):
+        cp.split(packed, tmp_path / "a", 2)
+    (packed / "motion.npz").write_bytes(b"second pack, longer")
+    second = cp.split(packed, tmp_path / "b", 2)
+    with pytest.raises(SystemExit, match="different splits"):
+        cp.join(tmp_path / "joined", first[0], second[1])
+    assert not (tmp_path / "joined").exists()  # nothing written before the checks pass
