@@ -24,10 +24,10 @@ holds:
 
 from __future__ import annotations
 
+import argparse
 import hashlib
 import json
 import lzma
-import sys
 from pathlib import Path
 
 import numpy as np
@@ -268,23 +268,34 @@ def check(a: Path, b: Path) -> None:
             print(f"{k}: max |difference| {np.abs(za[k] - zb[k]).max():.2e}")
 
 
-if __name__ == "__main__":
-    if len(sys.argv) < 4:
-        raise SystemExit("usage: corpus_pack.py pack|unpack|check|split SRC DST [...] | "
-                         "join OUT PART_DIR...")  # fmt: skip
-    if sys.argv[1] == "join":
-        join(Path(sys.argv[2]), *map(Path, sys.argv[3:]))
-        sys.exit()
-    cmd, src, dst = sys.argv[1:4]
-    if cmd == "split":
-        if len(sys.argv) > 5 or not all(a.isdigit() for a in sys.argv[4:]):
-            raise SystemExit("usage: corpus_pack.py split PACKED OUT [PARTS]")
-        split(Path(src), Path(dst), int(sys.argv[4]) if sys.argv[4:] else 2)
-        sys.exit()
-    if sys.argv[4:] not in ([], ["coarse"]) or (sys.argv[4:] and cmd != "pack"):
-        raise SystemExit(f"unknown arguments {sys.argv[4:]}: only `pack SRC DST coarse` takes one")
-    if cmd == "pack" and sys.argv[4:] == ["coarse"]:  # when the carry cap is tight
-        pack(Path(src), Path(dst), joint_step=2 * JOINT_STEP, rot_step=2 * ROT_STEP,
-             text_int8=True)  # fmt: skip
+def main(argv: list[str] | None = None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    p = sub.add_parser("pack", help="corpus -> motion.npz, text.npz")
+    p.add_argument("src", type=Path)
+    p.add_argument("dst", type=Path)
+    p.add_argument("coarse", nargs="?", choices=["coarse"], help="when the carry cap is tight")
+    for name, help_ in (("unpack", "pack -> corpus"), ("check", "largest differences")):
+        p = sub.add_parser(name, help=help_)
+        p.add_argument("src", type=Path)
+        p.add_argument("dst", type=Path)
+    p = sub.add_parser("split", help="a pack's files in N parts")
+    p.add_argument("src", type=Path)
+    p.add_argument("dst", type=Path)
+    p.add_argument("parts", nargs="?", type=int, default=2)
+    p = sub.add_parser("join", help="the parts back into whole files")
+    p.add_argument("dst", type=Path)
+    p.add_argument("parts", nargs="+", type=Path)
+    a = ap.parse_args(argv)
+    if a.cmd == "pack" and a.coarse:
+        pack(a.src, a.dst, joint_step=2 * JOINT_STEP, rot_step=2 * ROT_STEP, text_int8=True)
+    elif a.cmd == "split":
+        split(a.src, a.dst, a.parts)
+    elif a.cmd == "join":
+        join(a.dst, *a.parts)
     else:
-        {"pack": pack, "unpack": unpack, "check": check}[cmd](Path(src), Path(dst))
+        {"pack": pack, "unpack": unpack, "check": check}[a.cmd](a.src, a.dst)
+
+
+if __name__ == "__main__":
+    main()

@@ -23,7 +23,6 @@ drift, and of the travel, survives anchoring.
 from __future__ import annotations
 
 import argparse
-import dataclasses
 
 import numpy as np
 import torch
@@ -46,11 +45,10 @@ def drift(features: np.ndarray, fps: float = 30.0, delivered: bool = False
     j = features_to_joints(torch.as_tensor(f).float()).numpy()
     if delivered:
         j = delivered_joints(j[None], f[None, :, CONTACT])[0]
+    stats = motion_statistics(j, fps)  # pelvis_speed: the path, jitter included
     pelvis = j[:, PELVIS, [0, 2]].astype(np.float64)
-    dur = max(len(j) - 1, 1) / fps
-    path = np.linalg.norm(np.diff(pelvis, axis=0), axis=-1).sum() / dur
-    net = np.linalg.norm(pelvis[-1] - pelvis[0]) / dur
-    return float(path), float(net), motion_statistics(j, fps)["ankle_energy"]
+    net = np.linalg.norm(pelvis[-1] - pelvis[0]) / (max(len(j) - 1, 1) / fps)
+    return stats["pelvis_speed"], float(net), stats["ankle_energy"]
 
 
 def item_label(item) -> str | None:
@@ -82,10 +80,8 @@ def main() -> None:
             continue
         rows = [("real", real)]
         for w in weights:
-            vae, cfg = pipe.vae, pipe.vae.cfg
-            vae.cfg = dataclasses.replace(cfg, root_fusion=w)
-            rows.append((f"VAE, root_fusion {w:g}", reconstruct(vae, pipe.normalizer, real)))
-            vae.cfg = cfg
+            rec = reconstruct(pipe.vae, pipe.normalizer, real, root_fusion=w)
+            rows.append((f"VAE, root_fusion {w:g}", rec))
         for name, clips in rows:
             for delivered in (False, True) if args.delivered else (False,):
                 med = np.median(np.array([drift(f, delivered=delivered) for f in clips]), axis=0)

@@ -36,8 +36,12 @@ def reconstruct(
     normalizer: Normalizer,
     features: Sequence[Array],
     batch_size: int = 64,
+    root_fusion: float | None = None,
 ) -> list[Array]:
-    """Encode (posterior mean) and decode raw features (T_i, 262) -> raw features, same T_i."""
+    """Encode (posterior mean) and decode raw features (T_i, 262) -> raw features, same T_i.
+
+    Decoded as the pipeline decodes (positions fused with velocities); ``root_fusion``
+    overrides the VAE's weight of the pelvis path (None: the VAE's own)."""
     vae.eval()
     device = next(vae.parameters()).device
     out: list[Array] = []
@@ -55,7 +59,8 @@ def reconstruct(
         y = normalizer.denormalize(vae.decode(mu, mask))
         # as the pipeline decodes: positions made consistent with velocities, per clip
         cfg = vae.cfg
-        y = [fuse_positions(y[j, : f.shape[0]], cfg.position_fusion, cfg.root_fusion)
+        root = cfg.root_fusion if root_fusion is None else root_fusion
+        y = [fuse_positions(y[j, : f.shape[0]], cfg.position_fusion, root)
              for j, f in enumerate(chunk)]  # fmt: skip
         out.extend(r.cpu().numpy() for r in y)
     return out
