@@ -58,3 +58,28 @@ def test_root_weight_smooths_the_path_only(real_joints):
         (x[:, POS].reshape(-1, 22, 3) - x[:, POS].reshape(-1, 22, 3)[:, :1]) for x in (loose, tight)
     ]
     assert torch.allclose(rel[0], rel[1], atol=1e-9)
+
+
+def test_height_weight_fuses_the_pelvis_height_on_its_own(real_joints):
+    """height_weight: the pelvis's height is fused with its own weight, the floor path and
+    the pose keep theirs. Velocities biased upward would lift a pelvis fused at a small
+    weight off its decoded height; weight 1 keeps it there."""
+    f = joints_to_features(real_joints[:91])
+    biased = f.clone()
+    up = torch.tensor([0.0, 0.005, 0.0], dtype=f.dtype)  # 5 mm per frame upward
+    biased[:, VEL] = (biased[:, VEL].reshape(-1, 22, 3) + up).reshape(-1, 66)
+    loose = fuse_positions(biased, 1.0, 0.0002)
+    split = fuse_positions(biased, 1.0, 0.0002, 1.0)
+    height = fuse_positions(biased, 1.0, 1.0)
+    y, xz = 1, [0, 2]
+    assert torch.allclose(split[:, xz], loose[:, xz], atol=1e-9)  # pelvis floor path
+    assert torch.allclose(split[:, y], height[:, y], atol=1e-9)  # pelvis height
+    rel = [
+        x[:, POS].reshape(-1, 22, 3) - x[:, POS].reshape(-1, 22, 3)[:, :1] for x in (split, loose)
+    ]
+    assert torch.allclose(rel[0], rel[1], atol=1e-9)  # the pose relative to the pelvis
+    err = [(x[:, y] - f[:, y]).abs().max() for x in (loose, split)]
+    assert err[1] < 0.02 < err[0]
+    assert torch.equal(
+        fuse_positions(biased, 1.0, 0.005, 0.005), fuse_positions(biased, 1.0, 0.005)
+    )

@@ -423,6 +423,36 @@ def test_a_flow_stage_fine_tunes_from_a_model(trained, tmp_path):
     with pytest.raises(UMFError, match="not a model directory"):
         train_stage("sflow", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False),
                     init=tmp_path)  # fmt: skip
-    with pytest.raises(UMFError, match="not the VAE"):
-        train_stage("vae", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False),
-                    init=model)  # fmt: skip
+
+
+def test_the_vae_decoder_fine_tunes_alone_from_a_model(trained, tmp_path):
+    """--init + train_vae.decoder_only: the VAE starts from the model's weights, its
+    encoder (so every latent the flows know) stays bit-identical, the decoder trains."""
+    from umf.checkpoint import read_weights
+
+    root, _, _ = trained
+    model = save_tiny_model(tmp_path / "source", seed=7)
+    cfg = small_config()
+    tuning = ["train_vae.decoder_only=true", "vae.w_root_vel=1.0", "train_vae.max_steps=2",
+              "train_vae.warmup_steps=0"]  # fmt: skip
+    for o in [*TINY, *tuning]:
+        cfg = set_option(cfg, o)
+    logs: list[str] = []
+    with pytest.raises(UMFError, match="pass --init"):
+        train_stage("vae", root / "corpus", tmp_path / "bad", cfg, Launch(progress=False))
+    train_stage("vae", root / "corpus", tmp_path / "ft", cfg, Launch(progress=False),
+                init=model, log=logs.append)  # fmt: skip
+    assert any("starting from the weights" in m for m in logs)
+    start, tuned = read_weights(model, "vae"), read_weights(tmp_path / "ft" / "vae" / "last", "vae")
+    enc = ("in_proj", "encoder.", "adapter", "query_tokens")
+    assert all(torch.equal(tuned[k].float(), start[k].float()) for k in start if k.startswith(enc))
+    assert any(not torch.allclose(tuned[k].float(), start[k].float())
+               for k in start if k.startswith("decoder."))  # fmt: skip
+    with pytest.raises(UMFError, match="only the VAE stage"):
+        train_stage(
+            "sflow",
+            root / "corpus",
+            tmp_path / "bad2",
+            set_option(cfg, "train_sflow.decoder_only=true"),
+            Launch(progress=False),
+        )

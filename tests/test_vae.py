@@ -17,6 +17,7 @@ from umf.models.vae import (
     interaction_loss,
     kl_loss,
     reconstruction_loss,
+    root_velocity_loss,
     vae_losses,
 )
 from umf.representation import Normalizer, features_to_joints, joints_to_features
@@ -271,3 +272,45 @@ def test_overfits_real_clips(bandai_clips):
           f"{time.perf_counter() - start:.1f} s")  # fmt: skip
     assert first / last >= 5.0
     assert pose < POSE_LIMIT and err < GLOBAL_LIMIT
+
+
+def test_root_velocity_loss_measures_drift_in_m_per_s(walk_features):
+    """0 at the truth; a pelvis velocity slot off by 0.1 m/s sideways (at 30 fps) costs
+    0.1, whatever the rest of the body does; padded frames do not count."""
+    feats = walk_features[None]
+    mask = torch.ones(1, 40, dtype=torch.bool)
+    assert root_velocity_loss(feats, feats, mask, 30.0).item() == 0.0
+    drift = feats.clone()
+    drift[..., 66] += 0.1 / 30  # the pelvis's x velocity slot
+    drift[..., 69:132] += 1.0  # other joints' velocities: not this term's business
+    assert root_velocity_loss(drift, feats, mask, 30.0).item() == pytest.approx(0.1, rel=1e-4)
+    half = mask.clone()
+    half[:, 20:] = False
+    drift[:, 20:, 66] += 5.0
+    assert root_velocity_loss(drift, feats, half, 30.0).item() == pytest.approx(0.1, rel=1e-4)
+    norm = Normalizer.fit(feats)
+    x = norm.normalize(feats)
+    cfg = dataclasses.replace(TINY, w_root_vel=2.0)
+    terms = vae_losses(_output(norm.normalize(drift)), x, half, norm, cfg, fps=30.0)
+    assert terms["root_vel"].item() == pytest.approx(0.1, rel=1e-3)
+    assert "root_vel" not in vae_losses(_output(x), x, mask, norm, TINY)
+
+
+def test_freeze_encoder_leaves_latents_fixed(walk_features):
+    """A decoder-only step changes the decoder and not one encoder weight (the latents the
+    flows were trained on stay exactly the same)."""
+    vae = tiny()
+    vae.freeze_encoder()
+    x = walk_features[None, :32] / 10
+    mask = torch.ones(1, 32, dtype=torch.bool)
+    before = {k: v.clone() for k, v in vae.state_dict().items()}
+    mu_before = vae.encode(x, mask)[0]
+    opt = torch.optim.SGD([p for p in vae.parameters() if p.requires_grad], lr=0.1)
+    out = vae(x, mask)
+    reconstruction_loss(out.x_hat, x, mask).backward()
+    opt.step()
+    after = vae.state_dict()
+    enc = ("in_proj", "encoder.", "adapter", "query_tokens")
+    assert all(torch.equal(before[k], after[k]) for k in before if k.startswith(enc))
+    assert any(not torch.equal(before[k], after[k]) for k in before if k.startswith("decoder."))
+    assert torch.equal(vae.encode(x, mask)[0], mu_before)

@@ -46,11 +46,22 @@ class VAEConfig:
     # decoded positions follow the decoded velocities frame to frame (no shaking) and the
     # decoded positions over longer spans: representation.fuse_positions; 0 = raw output.
     # Smaller = smoother: 0.1 halved a wave's wrist motion, 1 keeps most of it and still
-    # removes two thirds of the frame-to-frame shake. The pelvis path trusts the velocities
-    # longer (a standing person's pelvis wandered at 0.65 m/s with 0.1, 0.21 with 0.005;
-    # walking speed 1.25 m/s, real median 1.24)
+    # removes two thirds of the frame-to-frame shake.
     position_fusion: float = 1.0
-    root_fusion: float = 0.005  # body target: each feature group weighs equally in recon
+    # The pelvis's floor path trusts the decoded velocities for seconds: the decoded
+    # absolute path jitters by centimetres every frame and drifts slowly (real wavers
+    # reconstructed by the bundled VAE travel 0.125 m/s net at 0.005, 0.072 at 0.0002, real
+    # 0.002; walks 1.16 and 1.27 m/s, real 1.26: scripts/vae_root_drift.py). Chosen on the
+    # val split (results/umf-small-bandai-20261127): single-person FID 19.0 -> 10.3,
+    # two-person 34.2 -> 24.9
+    root_fusion: float = 0.0002
+    # the pelvis's height; None = root_fusion. The decoded height is reliable and its
+    # velocity integrated over seconds is not (at 0.0002 feet sank 1.1 cm into the floor)
+    height_fusion: float | None = 1.0
+    # the floor path of people 2..N (S-Flow's), who are placed relative to person 1:
+    # at 0.0002 the val pairs' "distance" checks fell from 90 to 80 %, at 0.001 they stay
+    # at 90 %. None = root_fusion
+    reaction_root_fusion: float | None = 0.001
     # loss weights (paper Eq. 5). The geometric terms (metres, on the recomposed global
     # joints) are off as in the authors' release: on the Bandai corpus they dominate the
     # gradient with placement errors and the pose stops learning (memorising 32 crops,
@@ -63,6 +74,12 @@ class VAEConfig:
     w_contact: float = 0.0
     w_bone: float = 0.0
     w_interaction: float = 0.0
+    # L1 between the decoded and the real pelvis's horizontal velocity slot (m/s), which
+    # the decoded path mostly follows (root_fusion). The group-balanced SmoothL1 leaves a
+    # 0.05 m/s drift almost free (a few hundredths of the slot's std, in its quadratic
+    # part). Off in training from scratch; for fine-tuning the decoder
+    # (train_vae.decoder_only)
+    w_root_vel: float = 0.0
 
 
 @dataclass
@@ -192,6 +209,9 @@ class TrainConfig:
     # give half the training captions the other spelling of direction words (backwards <->
     # backward, forwards <-> forward, towards <-> toward; umf.train.datasets.respell_caption)
     respell_captions: bool = False
+    # VAE only: train the decoder and hold the encoder (and so every latent, and the flows
+    # trained on them) fixed; needs a VAE to start from (`umf train vae --init MODEL`)
+    decoder_only: bool = False
 
 
 @dataclass

@@ -207,8 +207,8 @@ def _fuse(pos: Tensor, vel: Tensor, weight: float) -> Tensor:
     return torch.linalg.solve(system, weight * pos + diff.T @ vel[..., :-1, :])
 
 
-def fuse_positions(features: Tensor, position_weight: float, root_weight: float | None = None
-                   ) -> Tensor:  # fmt: skip
+def fuse_positions(features: Tensor, position_weight: float, root_weight: float | None = None,
+                   height_weight: float | None = None) -> Tensor:  # fmt: skip
     """Make positions and velocities of decoded features (..., T, 262) agree.
 
     The feature is over-complete: positions and frame-to-frame velocities describe the
@@ -220,15 +220,17 @@ def fuse_positions(features: Tensor, position_weight: float, root_weight: float 
         weight * sum_t |P_t - P^_t|^2 + sum_t |P_{t+1} - P_t - V^_t|^2,
 
     following the predicted velocities from frame to frame and the predicted positions
-    over longer spans (no drift). The pelvis path uses ``root_weight`` (default: the
-    same), the joints relative to the pelvis ``position_weight``: a smaller root weight
-    trusts the velocities longer, where the absolute path is noisiest. The velocity slots
-    become the fused differences. Tridiagonal systems of T unknowns, one solve each.
+    over longer spans (no drift). The pelvis's floor path (x, z) uses ``root_weight``
+    (default: the same), its height ``height_weight`` (default: ``root_weight``), the
+    joints relative to the pelvis ``position_weight``: a smaller root weight trusts the
+    velocities longer, where the absolute path is noisiest. The velocity slots become the
+    fused differences. Tridiagonal systems of T unknowns, one solve each.
     """
     t = features.shape[-2]
     if position_weight <= 0 or t < 2:
         return features
     root_weight = position_weight if root_weight is None else root_weight
+    height_weight = root_weight if height_weight is None else height_weight
     lead = features.shape[:-1]
     pos = features[..., POS].to(torch.float64).reshape(*lead, NUM_JOINTS, 3)
     vel = features[..., VEL].to(torch.float64).reshape(*lead, NUM_JOINTS, 3)
@@ -236,6 +238,8 @@ def fuse_positions(features: Tensor, position_weight: float, root_weight: float 
     flat = (*lead[:-1], t, -1)
     rel = _fuse((pos - root).reshape(flat), (vel - root_vel).reshape(flat), position_weight)
     path = _fuse(root.reshape(flat), root_vel.reshape(flat), root_weight)
+    if height_weight != root_weight:
+        path[..., 1] = _fuse(root[..., 1], root_vel[..., 1], height_weight)[..., 0]
     fused = (rel.reshape(pos.shape) + path.reshape(root.shape)).reshape(*lead, 66)
     vel = features[..., VEL].to(torch.float64)
     new_vel = torch.cat([fused[..., 1:, :] - fused[..., :-1, :], vel[..., -1:, :]], dim=-2)

@@ -281,7 +281,7 @@ CHOICES = {
     "family": ("paper", "small"),
 }
 _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every", "seed"}
-_NON_NEGATIVE = {"reaction_noise", "context_noise"}  # floats >= 0
+_NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel"}  # floats >= 0
 _FRACTIONS = {"balance_labels"}  # floats in [0, 1]
 
 

@@ -60,7 +60,7 @@ def reconstruct(
         # as the pipeline decodes: positions made consistent with velocities, per clip
         cfg = vae.cfg
         root = cfg.root_fusion if root_fusion is None else root_fusion
-        y = [fuse_positions(y[j, : f.shape[0]], cfg.position_fusion, root)
+        y = [fuse_positions(y[j, : f.shape[0]], cfg.position_fusion, root, cfg.height_fusion)
              for j, f in enumerate(chunk)]  # fmt: skip
         out.extend(r.cpu().numpy() for r in y)
     return out

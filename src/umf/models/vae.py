@@ -182,6 +182,16 @@ class MotionVAE(nn.Module):
         self.decoder = SkipTransformer(cfg, cross=True)
         self.out_proj = nn.Linear(d, k * self.space_dim)
 
+    def encoder_modules(self) -> list[nn.Module]:
+        """Everything that maps a motion to its latent (frozen by a decoder-only fine-tune,
+        so the latents the flows were trained on stay exactly what they were)."""
+        return [self.in_proj, self.encoder, self.adapter]
+
+    def freeze_encoder(self) -> None:
+        for module in self.encoder_modules():
+            module.requires_grad_(False)
+        self.query_tokens.requires_grad_(False)
+
     def set_normalizers(self, features: Normalizer, body: Normalizer | None = None) -> None:
         """The corpus normaliser of the 262-d input, and (body target) the body-frame one."""
         self.feature_mean.copy_(features.mean)
@@ -344,6 +354,17 @@ def foot_contact_loss(
     return (excess * weight).sum() / weight.sum().clamp_min(1.0)
 
 
+def root_velocity_loss(pred: Tensor, true: Tensor, mask: Tensor, fps: float) -> Tensor:
+    """Mean L1 (m/s) between the pelvis's horizontal velocity slots of raw global features
+    (B, T, 262), valid frames only. The velocity slot, not the decoded path: the path is
+    rebuilt mostly from these velocities (``representation.fuse_positions`` at a small
+    ``root_fusion``), and the decoded absolute path jitters by centimetres every frame.
+    L1, not squared: a standing person's small steady drift is what this term is for,
+    and a square leaves it almost free."""
+    err = (pred[..., VEL][..., [0, 2]] - true[..., VEL][..., [0, 2]]).abs().sum(-1)
+    return fps * masked_mean(err, mask)
+
+
 def bone_length_loss(pred: Tensor, true: Tensor, mask: Tensor) -> Tensor:
     """L1 between per-frame bone lengths (21 bones, metres)."""
     return masked_mean((bone_lengths(pred) - bone_lengths(true))[..., 1:].abs(), mask)
@@ -395,12 +416,14 @@ def vae_losses(
     normalizer: Normalizer,
     cfg: VAEConfig,
     people: Tensor | None = None,
+    fps: float = 30.0,
 ) -> dict[str, Tensor]:
     """Eq. 5: every enabled term (unweighted) plus their weighted sum under 'total'.
 
     x (B, T, 262) normalised targets, mask (B, T) valid frames. ``people`` (S, P) long
     lists the batch rows of each multi-person scene (-1 = no person in that slot); the
-    interaction term needs it. A zero weight skips its term entirely.
+    interaction term needs it. A zero weight skips its term entirely. ``fps``: the
+    features' frame rate (the root-velocity term is in m/s).
     """
     terms: dict[str, Tensor] = {}
     weights: dict[str, float] = {}
@@ -416,7 +439,7 @@ def vae_losses(
     else:
         add("recon", cfg.w_recon, lambda: reconstruction_loss(out.x_hat, x, mask))
     add("kl", cfg.w_kl, lambda: kl_loss(out.mu, out.logvar))
-    geometric = (cfg.w_pos, cfg.w_vel, cfg.w_contact, cfg.w_bone, cfg.w_interaction)
+    geometric = (cfg.w_pos, cfg.w_vel, cfg.w_contact, cfg.w_bone, cfg.w_interaction, cfg.w_root_vel)
     if any(w != 0.0 for w in geometric):
         pred, true = normalizer.denormalize(out.x_hat), normalizer.denormalize(x)
         shape = (*x.shape[:2], NUM_JOINTS, 3)
@@ -426,6 +449,7 @@ def vae_losses(
         add("vel", cfg.w_vel, lambda: velocity_loss(pj, pv, tv, mask))
         add("contact", cfg.w_contact, lambda: foot_contact_loss(pj, tj, true[..., CONTACT], mask))
         add("bone", cfg.w_bone, lambda: bone_length_loss(pj, tj, mask))
+        add("root_vel", cfg.w_root_vel, lambda: root_velocity_loss(pred, true, mask, fps))
         if people is not None and people.shape[1] > 1:
             rows = people.clamp_min(0)
             present = people >= 0

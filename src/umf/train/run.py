@@ -73,6 +73,9 @@ def check_run_config(cfg: UMFConfig) -> None:
             check_train_config(getattr(cfg, f"train_{stage}"))
         except UMFError as exc:
             raise UMFError(f"train_{stage}: {exc}") from exc
+        if stage != "vae" and getattr(cfg, f"train_{stage}").decoder_only:
+            raise UMFError(f"train_{stage}.decoder_only: only the VAE stage has a decoder to "
+                           "fine-tune alone")  # fmt: skip
 
 
 def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig:
@@ -165,9 +168,11 @@ def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], Non
     that has one must have this very VAE: the flow's weights were trained on its latents)."""
     import shutil
 
-    if stage == "vae":
-        raise UMFError("--init starts a flow stage (pflow, sflow) from a model; not the VAE")
     model = Path(model)
+    if stage == "vae":  # the VAE itself is what is fine-tuned: nothing to hand the run
+        if not (model / "vae.safetensors").exists():
+            raise UMFError(f"{model}: not a model directory (no vae.safetensors)")
+        return model
     for name in ("vae", stage):
         if not (model / f"{name}.safetensors").exists():
             raise UMFError(f"{model}: not a model directory (no {name}.safetensors)")
@@ -277,9 +282,9 @@ def train_stage(
 ) -> dict[str, Any]:
     """Train one stage of a run; the flow stages load the run's trained VAE (frozen).
 
-    ``init`` (flow stages): a model directory whose weights for this stage start the
-    training (fine-tuning), and whose VAE becomes the run's when the run has none; its
-    latent statistics come with the weights. A resumed run continues from its own
+    ``init``: a model directory whose weights for this stage start the training
+    (fine-tuning); for a flow stage its VAE becomes the run's when the run has none, and
+    its latent statistics come with the weights. A resumed run continues from its own
     checkpoint instead.
     """
     from umf.models.pflow import PFlow
@@ -298,6 +303,9 @@ def train_stage(
     corpus = Corpus.load(corpus_dir)
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
+    resuming = resume and best_or_last(run_dir / stage) is not None
+    if stage == "vae" and t.decoder_only and init is None and not resuming:
+        raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
     torch.manual_seed(t.seed)
     normalizer = corpus.normalizer
     if stage == "vae":

@@ -87,6 +87,8 @@ class VAEStage:
         self.normalizer = normalizer
         self.vae = vae or MotionVAE(config.vae)
         self.vae.set_normalizers(normalizer, body_normalizer)
+        if config.train_vae.decoder_only:
+            self.vae.freeze_encoder()
 
     def modules(self) -> dict[str, nn.Module]:
         return {"vae": self.vae}
@@ -101,7 +103,9 @@ class VAEStage:
         else:
             x, mask = batch["features"], batch["mask"]
         out = self.vae(x, mask)
-        losses = vae_losses(out, x, mask, self.normalizer, self.config.vae, people=people)
+        losses = vae_losses(
+            out, x, mask, self.normalizer, self.config.vae, people=people, fps=self.config.fps
+        )
         return losses, out.x_hat, x, mask
 
     def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
