@@ -83,3 +83,7 @@ def test_height_weight_fuses_the_pelvis_height_on_its_own(real_joints):
     assert torch.equal(
         fuse_positions(biased, 1.0, 0.005, 0.005), fuse_positions(biased, 1.0, 0.005)
     )
+    batch = torch.stack([torch.stack([biased, f]), torch.stack([f, biased])])  # (2, 2, T, 262)
+    fused = fuse_positions(batch, 1.0, 0.0002, 1.0)
+    assert torch.allclose(fused[0, 0], split, atol=1e-9)
+    assert torch.allclose(fused[1, 0], fuse_positions(f, 1.0, 0.0002, 1.0), atol=1e-9)

@@ -444,7 +444,7 @@ def test_the_vae_decoder_fine_tunes_alone_from_a_model(trained, tmp_path):
                 init=model, log=logs.append)  # fmt: skip
     assert any("starting from the weights" in m for m in logs)
     start, tuned = read_weights(model, "vae"), read_weights(tmp_path / "ft" / "vae" / "last", "vae")
-    enc = ("in_proj", "encoder.", "adapter", "query_tokens")
+    enc = ("in_proj", "encoder.", "adapter", "query_tokens", "feature_", "body_")  # + buffers
     assert all(torch.equal(tuned[k].float(), start[k].float()) for k in start if k.startswith(enc))
     assert any(not torch.allclose(tuned[k].float(), start[k].float())
                for k in start if k.startswith("decoder."))  # fmt: skip
@@ -456,3 +456,23 @@ def test_the_vae_decoder_fine_tunes_alone_from_a_model(trained, tmp_path):
             set_option(cfg, "train_sflow.decoder_only=true"),
             Launch(progress=False),
         )
+
+
+def test_people_after_the_first_decode_with_the_reaction_root_fusion(trained):
+    """Person 1's floor path is fused at vae.root_fusion, people 2..N at
+    vae.reaction_root_fusion: changing one moves only its people."""
+    _, model, _ = trained
+
+    def raw(**vae) -> np.ndarray:
+        pipe = UMFPipeline.from_pretrained(model)
+        for k, v in vae.items():
+            setattr(pipe.config.vae, k, v)
+        return pipe(
+            "two people walk", num_people=3, seconds=1.0, seed=0, fit=False, separate=False
+        )[0].joints
+
+    base = raw(root_fusion=0.005, reaction_root_fusion=0.005)
+    react = raw(root_fusion=0.005, reaction_root_fusion=1e-4)
+    first = raw(root_fusion=1e-4, reaction_root_fusion=0.005)
+    assert np.array_equal(react[0], base[0]) and not np.allclose(react[1:], base[1:])
+    assert np.array_equal(first[1:], base[1:]) and not np.allclose(first[0], base[0])

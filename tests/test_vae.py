@@ -314,3 +314,28 @@ def test_freeze_encoder_leaves_latents_fixed(walk_features):
     assert all(torch.equal(before[k], after[k]) for k in before if k.startswith(enc))
     assert any(not torch.equal(before[k], after[k]) for k in before if k.startswith("decoder."))
     assert torch.equal(vae.encode(x, mask)[0], mu_before)
+
+
+def test_fusion_weights_are_checked_and_old_configs_keep_their_decoding():
+    """A fusion weight of 0 leaves the floor path undetermined (a singular system): refused
+    by name. A config saved before height_fusion / reaction_root_fusion existed decodes
+    everything at its own root_fusion, not at the new defaults."""
+    from umf.config import UMFConfig, set_option, small_config
+    from umf.errors import UMFError
+    from umf.validation import check_config_values
+
+    cfg = small_config()
+    for bad in ("vae.root_fusion=0", "vae.reaction_root_fusion=0", "vae.height_fusion=-1",
+                "vae.position_fusion=-0.5"):  # fmt: skip
+        with pytest.raises(UMFError, match=bad.split("=")[0]):
+            check_config_values(set_option(cfg, bad))
+    check_config_values(set_option(cfg, "vae.reaction_root_fusion=null"))
+    old = cfg.to_dict()
+    for key in ("height_fusion", "reaction_root_fusion"):
+        del old["vae"][key]
+    old["vae"]["root_fusion"] = 0.005
+    legacy = UMFConfig.from_dict(old).vae
+    assert (legacy.root_fusion, legacy.height_fusion, legacy.reaction_root_fusion) == (
+        0.005, None, None)  # fmt: skip
+    fresh = UMFConfig.from_dict(cfg.to_dict()).vae
+    assert (fresh.height_fusion, fresh.reaction_root_fusion) == (1.0, 0.001)

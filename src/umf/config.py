@@ -237,7 +237,7 @@ class UMFConfig:
 
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> UMFConfig:
-        return _from_dict(cls, d)
+        return _from_dict(cls, _legacy_decoding(d))
 
     def save_yaml(self, path: str | Path) -> None:
         from umf.io import write_text_atomic
@@ -252,7 +252,18 @@ class UMFConfig:
             raise UMFError(f"{path}: cannot read config ({exc})") from exc
         family = data.pop("family", "paper") if isinstance(data, dict) else "paper"
         base = family_config(family).to_dict()
-        return cls.from_dict(_merge(base, data))
+        return cls.from_dict(_merge(base, _legacy_decoding(data)))
+
+
+def _legacy_decoding(data: Any) -> Any:
+    """A whole saved config (every VAE option written out) from before ``height_fusion``
+    and ``reaction_root_fusion`` existed decoded everything at ``root_fusion``: keep it so,
+    rather than giving an old model the new defaults' decoding."""
+    vae = data.get("vae") if isinstance(data, dict) else None
+    if isinstance(vae, dict) and "w_interaction" in vae and "height_fusion" not in vae:
+        vae = {"height_fusion": None, "reaction_root_fusion": None, **vae}
+        return {**data, "vae": vae}
+    return data
 
 
 def _plain(x: Any) -> Any:

@@ -281,7 +281,8 @@ CHOICES = {
     "family": ("paper", "small"),
 }
 _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every", "seed"}
-_NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel"}  # floats >= 0
+_NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion"}  # >= 0
+_POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
 _FRACTIONS = {"balance_labels"}  # floats in [0, 1]
 
 
@@ -309,8 +310,10 @@ def _check_value(where: str, kind: str, value: Any) -> None:
         hi = 2**63 - 1 if name in _UNBOUNDED else MAX_LAYERS if "layers" in name else MAX_CONFIG_INT
         check_int(where, value, 0, hi)
     elif kind.startswith("float"):
-        lo = 0.0 if name in _NON_NEGATIVE | _FRACTIONS else -1e9
+        lo = 0.0 if name in _NON_NEGATIVE | _FRACTIONS | _POSITIVE else -1e9
         check_float(where, value, lo, 1.0 if name in _FRACTIONS else 1e9)
+        if name in _POSITIVE and value <= 0:  # a weight of 0 leaves the path undetermined
+            raise UMFError(f"{where} must be greater than 0, got {value}")
     elif kind.startswith("str"):
         if not isinstance(value, str):
             raise UMFError(f"{where} must be a string, got {value!r}")

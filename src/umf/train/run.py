@@ -306,6 +306,9 @@ def train_stage(
     resuming = resume and best_or_last(run_dir / stage) is not None
     if stage == "vae" and t.decoder_only and init is None and not resuming:
         raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
+    if stage == "vae" and init is not None and not t.decoder_only:
+        log(f"vae: the encoder trains too, so the latents change; the flows of {init} know "
+            "the old ones: retrain them (or set train_vae.decoder_only=true)")  # fmt: skip
     torch.manual_seed(t.seed)
     normalizer = corpus.normalizer
     if stage == "vae":
