@@ -52,6 +52,8 @@ def trained(tmp_path_factory):
 
 def test_all_stages_train_and_export(trained):
     root, model, summaries = trained
+    # training wrote the corpus's spellings into the model (text.respell, never None after)
+    assert UMFPipeline.from_pretrained(model).config.text.respell is not None
     for s, summary in summaries.items():
         assert summary["steps"] == 4, s
         assert (root / "run" / s / "metrics.csv").exists()
@@ -476,3 +478,18 @@ def test_people_after_the_first_decode_with_the_reaction_root_fusion(trained):
     first = raw(root_fusion=1e-4, reaction_root_fusion=0.005)
     assert np.array_equal(react[0], base[0]) and not np.allclose(react[1:], base[1:])
     assert np.array_equal(first[1:], base[1:]) and not np.allclose(first[0], base[0])
+
+
+def test_prompts_are_respelled_into_the_captions_spelling(trained):
+    """text.respell: "walks backward" is encoded as "walks backwards", so both give the
+    same motion under one seed; without the pair they differ."""
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+
+    def joints(prompt: str) -> np.ndarray:
+        return pipe(prompt, num_people=1, seconds=1.0, seed=0, fit=False)[0].joints
+
+    pipe.config.text.respell = ("backward=backwards",)
+    assert np.array_equal(joints("a person walks backward"), joints("a person walks backwards"))
+    pipe.config.text.respell = ()
+    assert not np.allclose(joints("a person walks backward"), joints("a person walks backwards"))

@@ -362,3 +362,29 @@ def test_cache_only_encoder_reads_a_cache_built_elsewhere(clip, tmp_path):
     (tmp_path / "encoder.json").write_text("{broken")
     with pytest.raises(UMFError, match=r"encoder\.json"):
         CachedTextEncoder.load(tmp_path)
+
+
+def test_respell_prompt_keeps_case_and_whole_words():
+    from umf.text import respell_prompt
+
+    pairs = ["backward=backwards", "toward=towards"]
+    assert respell_prompt("Walks BACKWARD toward me, backwardness stays.", pairs) == (
+        "Walks BACKWARDS towards me, backwardness stays."
+    )
+    assert respell_prompt("Backward.", pairs) == "Backwards."
+    assert respell_prompt("a person walks backward", None) == "a person walks backward"
+    assert respell_prompt("a person walks backward", []) == "a person walks backward"
+    for bad in (["backward"], ["back ward=x"], ["=backwards"], [3]):
+        with pytest.raises(UMFError, match="word=word"):
+            respell_prompt("x", bad)
+
+
+def test_respell_config_is_checked():
+    from umf.config import set_option, small_config
+    from umf.validation import check_config_values
+
+    cfg = small_config()
+    check_config_values(set_option(cfg, "text.respell=[backward=backwards]"))
+    check_config_values(set_option(cfg, "text.respell=[]"))
+    with pytest.raises(UMFError, match="word=word"):
+        check_config_values(set_option(cfg, "text.respell=[oops]"))

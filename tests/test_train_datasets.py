@@ -102,6 +102,15 @@ def test_respell_caption_swaps_spellings_and_is_an_involution():
         assert D.respell_caption(want) == text
 
 
+def test_preferred_spellings_map_what_the_captions_never_write():
+    caps = ["A person walks backwards.", "Someone runs forward.", "Walks forward, then forwards"]
+    # backward: never written, backwards is -> mapped; forward / forwards both written: no
+    # mapping; toward / towards: neither written -> no mapping
+    assert D.preferred_spellings(caps) == ("backward=backwards",)
+    assert D.preferred_spellings([]) == ()
+    assert D.preferred_spellings(["TOWARD the wall"]) == ("towards=toward",)
+
+
 def test_respelled_captions_leave_every_other_draw_alone(corpus, monkeypatch):
     """``respell`` only rewrites about half the captions that have such a word; crops,
     mirroring and features are the draws of the dataset without it."""

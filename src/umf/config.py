@@ -155,6 +155,11 @@ class TextConfig:
     encoder: str = "minilm"  # or "clip"
     path: str | None = None  # local weights directory for CLIP
     max_length: int = 128
+    # prompts are respelled into the training captions' spelling before encoding,
+    # "unseen=seen" word pairs: the Bandai captions say "backwards" and never "backward",
+    # and "A person walks backward." walked back at 0.30 m/s against 0.71 for "backwards"
+    # (real 0.75). None: training fills it from the corpus (train.datasets.preferred_spellings)
+    respell: tuple[str, ...] | None = None
 
 
 @dataclass

@@ -39,6 +39,7 @@ from umf.representation import (
 from umf.scene import Scene
 from umf.separation import separate_people
 from umf.streams import fresh_seed, scene_generators
+from umf.text import respell_prompt
 from umf.validation import (
     MAX_PEOPLE,
     Request,
@@ -251,7 +252,8 @@ class UMFPipeline:
         num_people, guidance = req.num_people, req.guidance
         gen = scene_generators(seed, indices, self.device)
         b = len(prompts)
-        text = self.text_encoder.encode(prompts).to(self.device)
+        text = self.text_encoder.encode([respell_prompt(p, self.config.text.respell)
+                                         for p in prompts]).to(self.device)  # fmt: skip
         uncond = self.text_encoder.encode([""] * b).to(self.device)
         nfe = 0
         frame = None

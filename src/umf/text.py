@@ -13,6 +13,8 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import re
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, Literal
@@ -22,6 +24,49 @@ from torch import Tensor, nn
 
 from umf.errors import UMFError
 from umf.io import save_tensors_atomic, write_text_atomic
+
+
+# --------------------------------------------------------------------- words
+def word_pattern(words) -> re.Pattern:
+    """Whole words, case-insensitive; longest alternatives first, so "counter-clockwise"
+    is never read as "clockwise"."""
+    alternatives = sorted(map(re.escape, words), key=len, reverse=True)
+    return re.compile(r"\b(" + "|".join(alternatives) + r")\b", re.IGNORECASE)
+
+
+def swap_words(text: str, table: dict[str, str], pattern: re.Pattern | None = None) -> str:
+    """Replace every word of ``table`` (lower-case keys) in ``text``, keeping its case."""
+    if not table:
+        return text
+
+    def swap(m: re.Match) -> str:
+        word = m.group(0)
+        out = table[word.lower()]
+        if word.isupper() and len(word) > 1:
+            return out.upper()
+        return out[0].upper() + out[1:] if word[0].isupper() else out
+
+    return (pattern or word_pattern(table)).sub(swap, text)
+
+
+def respell_table(pairs: Sequence[str] | None) -> dict[str, str]:
+    """``("backward=backwards", ...)`` -> {"backward": "backwards", ...}; one-line error
+    for anything but two words joined by '='."""
+    table: dict[str, str] = {}
+    for pair in pairs or ():
+        a, sep, b = (x.strip().lower() for x in str(pair).partition("="))
+        word = re.compile(r"[a-z][a-z'-]*")
+        if not sep or not word.fullmatch(a) or not word.fullmatch(b):
+            raise UMFError(f"text.respell entries are 'word=word', got {pair!r}")
+        table[a] = b
+    return table
+
+
+def respell_prompt(text: str, pairs: Sequence[str] | None) -> str:
+    """A prompt in the training captions' spelling (``text.respell``), so that a word the
+    captions always spell the other way still means what it says to the text encoder."""
+    return swap_words(text, respell_table(pairs))
+
 
 Pooling = Literal["mean", "eot"]
 

@@ -21,7 +21,6 @@ from __future__ import annotations
 
 import math
 import os
-import re
 from collections import Counter
 from collections.abc import Hashable, Iterator, Sequence
 from typing import Any
@@ -46,6 +45,7 @@ from umf.representation import (
     mirror_features,
 )
 from umf.rotations import yaw_matrix
+from umf.text import swap_words, word_pattern
 
 Tensor = torch.Tensor
 
@@ -73,14 +73,8 @@ _SPELLINGS = {"backwards": "backward", "forwards": "forward", "towards": "toward
 _SPELLINGS |= {v: k for k, v in _SPELLINGS.items()}
 
 
-def _word_re(words) -> re.Pattern:
-    # longest alternatives first, so "counter-clockwise" is never read as "clockwise"
-    alternatives = sorted(map(re.escape, words), key=len, reverse=True)
-    return re.compile(r"\b(" + "|".join(alternatives) + r")\b", re.IGNORECASE)
-
-
-_SIDE_RE = _word_re(_SIDE_WORDS)
-_SPELL_RE = _word_re(_SPELLINGS)
+_SIDE_RE = word_pattern(_SIDE_WORDS)
+_SPELL_RE = word_pattern(_SPELLINGS)
 
 
 # --------------------------------------------------------------------- pure functions
@@ -118,28 +112,24 @@ def canonicalize_features(features: Tensor) -> Tensor:
     return place_features(features, yaw, float(shift[0]), float(shift[2]))
 
 
-def _swap_words(text: str, table: dict[str, str], pattern: re.Pattern) -> str:
-    """Replace every word of ``table`` in ``text`` by its partner, keeping its case."""
-
-    def swap(m: re.Match) -> str:
-        word = m.group(0)
-        out = table[word.lower()]
-        if word.isupper() and len(word) > 1:
-            return out.upper()
-        return out[0].upper() + out[1:] if word[0].isupper() else out
-
-    return pattern.sub(swap, text)
-
-
 def mirror_caption(text: str) -> str:
     """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
-    return _swap_words(text, _SIDE_WORDS, _SIDE_RE)
+    return swap_words(text, _SIDE_WORDS, _SIDE_RE)
 
 
 def respell_caption(text: str) -> str:
     """The other spelling of direction words: backwards <-> backward, forwards <-> forward,
     towards <-> toward (same meaning; training on both makes either prompt work)."""
-    return _swap_words(text, _SPELLINGS, _SPELL_RE)
+    return swap_words(text, _SPELLINGS, _SPELL_RE)
+
+
+def preferred_spellings(captions: Sequence[str]) -> tuple[str, ...]:
+    """``"unseen=seen"`` for each direction word whose one spelling the captions never use
+    and the other they do (``text.respell``: prompts are respelled before encoding, so a
+    user's "walks backward" reads as the captions' "walks backwards")."""
+    counts = Counter(w.lower() for c in captions for w in _SPELL_RE.findall(c))
+    return tuple(sorted(f"{a}={b}" for a, b in _SPELLINGS.items()
+                        if counts[a] == 0 and counts[b] > 0))  # fmt: skip
 
 
 def crop_window(

@@ -8,6 +8,7 @@ A run directory holds ``config.yaml`` and one sub-directory per stage (``vae/``,
 
 from __future__ import annotations
 
+import dataclasses
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -301,6 +302,11 @@ def train_stage(
     if init is not None:
         init = _init_model(init, stage, run_dir, log)
     corpus = Corpus.load(corpus_dir)
+    if cfg.text.respell is None:  # prompts will be respelled into these captions' spelling
+        from umf.train.datasets import preferred_spellings
+
+        respell = preferred_spellings(corpus_captions(corpus))
+        cfg = dataclasses.replace(cfg, text=dataclasses.replace(cfg.text, respell=respell))
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
     resuming = resume and best_or_last(run_dir / stage) is not None
