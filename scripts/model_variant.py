@@ -24,6 +24,7 @@ from pathlib import Path
 
 from umf.config import UMFConfig, set_option
 from umf.errors import UMFError
+from umf.pipeline import UMFPipeline
 from umf.validation import check_model_config
 
 
@@ -53,6 +54,7 @@ def write_variant(src: Path, dst: Path, options: list[str], name: str | None = N
         fmt["variant_of"] = {"name": json.loads((src / "format.json").read_text()).get("name"),
                              "options": list(options)}  # fmt: skip
         (tmp / "format.json").write_text(json.dumps(fmt, indent=2))
+        UMFPipeline.from_pretrained(tmp)  # the weights must still fit (no d_model changes)
         tmp.rename(dst)
     except BaseException:
         shutil.rmtree(tmp, ignore_errors=True)

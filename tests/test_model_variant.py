@@ -32,6 +32,8 @@ def test_a_variant_decodes_with_its_options_and_keeps_the_weights(tmp_path):
         mv.write_variant(src, dst, [])
     with pytest.raises(UMFError, match="root_fusion"):  # checked before anything is written
         mv.write_variant(src, tmp_path / "bad", ["vae.root_fusion=oops"])
+    with pytest.raises(UMFError, match="shape"):  # options the weights cannot take
+        mv.write_variant(src, tmp_path / "bad", ["vae.d_model=64"])
     with pytest.raises(UMFError, match="not a model directory"):
         mv.write_variant(tmp_path, tmp_path / "bad", [])
     assert not (tmp_path / "bad").exists()
