@@ -87,3 +87,4 @@ def test_height_weight_fuses_the_pelvis_height_on_its_own(real_joints):
     fused = fuse_positions(batch, 1.0, 0.0002, 1.0)
     assert torch.allclose(fused[0, 0], split, atol=1e-9)
     assert torch.allclose(fused[1, 0], fuse_positions(f, 1.0, 0.0002, 1.0), atol=1e-9)
+    assert fuse_positions(batch[:, :0], 1.0, 0.0002, 1.0).shape == (2, 0, *f.shape)  # no one

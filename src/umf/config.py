@@ -62,6 +62,15 @@ class VAEConfig:
     # at 0.0002 the val pairs' "distance" checks fell from 90 to 80 %, at 0.001 they stay
     # at 90 %. None = root_fusion
     reaction_root_fusion: float | None = 0.001
+
+    def fusion_weights(self, reaction: bool = False) -> tuple[float, float, float | None]:
+        """(position, root, height) weights of representation.fuse_positions for person 1
+        or (``reaction``) people 2..N: how the pipeline decodes them."""
+        root = self.root_fusion
+        if reaction and self.reaction_root_fusion is not None:
+            root = self.reaction_root_fusion
+        return self.position_fusion, root, self.height_fusion
+
     # loss weights (paper Eq. 5). The geometric terms (metres, on the recomposed global
     # joints) are off as in the authors' release: on the Bandai corpus they dominate the
     # gradient with placement errors and the pose stops learning (memorising 32 crops,

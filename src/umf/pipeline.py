@@ -290,8 +290,11 @@ class UMFPipeline:
             nfe += n
         z = torch.stack(latents, dim=1)  # (B, N, p, r)
         check_finite(z, "the sampled latents (P-Flow / S-Flow output)")
-        feats = torch.stack([self.decode(z[:, k], t, reaction=k > 0) for k in range(num_people)],
-                            dim=1)  # fmt: skip
+        raw = self._decode_raw(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
+        vae = self.config.vae  # person 1 and people 2..N fuse their floor paths differently
+        feats = torch.cat([fuse_positions(raw[:, :1], *vae.fusion_weights()),
+                           fuse_positions(raw[:, 1:], *vae.fusion_weights(reaction=True))],
+                          dim=1)  # fmt: skip
         if frame is not None:  # back into the user's frame; person 1 is their motion exactly
             feats = transform_features(feats.cpu(), frame, inverse=True)
             feats[:, 0] = assemble_features(torch.from_numpy(actor).float(), rot6d)
@@ -327,13 +330,13 @@ class UMFPipeline:
         """Latents (B, p, r) -> de-normalised features (B, T, 262). ``reaction``: people
         2..N (the S-Flow's), whose floor path may trust its decoded positions more
         (``vae.reaction_root_fusion``): they are placed relative to person 1."""
+        raw = self._decode_raw(z, num_frames)
+        return fuse_positions(raw, *self.config.vae.fusion_weights(reaction))
+
+    def _decode_raw(self, z: torch.Tensor, num_frames: int) -> torch.Tensor:
+        """Latents (B, p, r) -> de-normalised features (B, T, 262), before the fusion."""
         mask = torch.ones(z.shape[0], num_frames, dtype=torch.bool, device=z.device)
-        raw = self.normalizer.denormalize(self.vae.decode(z, mask))
-        cfg = self.config.vae
-        root = cfg.root_fusion
-        if reaction and cfg.reaction_root_fusion is not None:
-            root = cfg.reaction_root_fusion
-        return fuse_positions(raw, cfg.position_fusion, root, cfg.height_fusion)
+        return self.normalizer.denormalize(self.vae.decode(z, mask))
 
     def _canonical_actor(self, actor: np.ndarray) -> tuple[torch.Tensor, RigidTransform]:
         """The actor (T, 22, 3) in its canonical frame, and the map into that frame."""

@@ -235,9 +235,9 @@ def fuse_positions(features: Tensor, position_weight: float, root_weight: float 
     pos = features[..., POS].to(torch.float64).reshape(*lead, NUM_JOINTS, 3)
     vel = features[..., VEL].to(torch.float64).reshape(*lead, NUM_JOINTS, 3)
     root, root_vel = pos[..., :1, :], vel[..., :1, :]
-    flat = (*lead[:-1], t, -1)
+    flat = (*lead[:-1], t, NUM_JOINTS * 3)  # explicit sizes: an empty batch stays empty
     rel = _fuse((pos - root).reshape(flat), (vel - root_vel).reshape(flat), position_weight)
-    path = _fuse(root.reshape(flat), root_vel.reshape(flat), root_weight)
+    path = _fuse(root.reshape(*flat[:-1], 3), root_vel.reshape(*flat[:-1], 3), root_weight)
     if height_weight != root_weight:
         path[..., 1] = _fuse(root[..., 1], root_vel[..., 1], height_weight)[..., 0]
     fused = (rel.reshape(pos.shape) + path.reshape(root.shape)).reshape(*lead, 66)

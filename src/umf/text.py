@@ -10,6 +10,7 @@ need it, reading data does not).
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import json
 import os
@@ -49,23 +50,32 @@ def swap_words(text: str, table: dict[str, str], pattern: re.Pattern | None = No
     return (pattern or word_pattern(table)).sub(swap, text)
 
 
+_WORD = re.compile(r"[a-z][a-z'-]*")
+
+
 def respell_table(pairs: Sequence[str] | None) -> dict[str, str]:
     """``("backward=backwards", ...)`` -> {"backward": "backwards", ...}; one-line error
     for anything but two words joined by '='."""
     table: dict[str, str] = {}
     for pair in pairs or ():
         a, sep, b = (x.strip().lower() for x in str(pair).partition("="))
-        word = re.compile(r"[a-z][a-z'-]*")
-        if not sep or not word.fullmatch(a) or not word.fullmatch(b):
+        if not sep or not _WORD.fullmatch(a) or not _WORD.fullmatch(b):
             raise UMFError(f"text.respell entries are 'word=word', got {pair!r}")
         table[a] = b
     return table
 
 
+@functools.lru_cache(maxsize=8)
+def _respeller(pairs: tuple[str, ...]) -> tuple[dict[str, str], re.Pattern | None]:
+    table = respell_table(pairs)  # parsed and compiled once per model, not per prompt
+    return table, word_pattern(table) if table else None
+
+
 def respell_prompt(text: str, pairs: Sequence[str] | None) -> str:
     """A prompt in the training captions' spelling (``text.respell``), so that a word the
     captions always spell the other way still means what it says to the text encoder."""
-    return swap_words(text, respell_table(pairs))
+    table, pattern = _respeller(tuple(pairs or ()))
+    return swap_words(text, table, pattern)
 
 
 Pooling = Literal["mean", "eot"]

@@ -294,12 +294,13 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             raise UMFError(f"{where} must not be null")
         return
     name = where.rsplit(".", 1)[-1]
-    if kind.startswith("tuple[str"):  # word lists (text.respell): may be empty
-        from umf.text import respell_table
-
+    if kind.startswith("tuple[str"):  # word lists: may be empty
         if not isinstance(value, tuple | list):
             raise UMFError(f"{where} must be a list, got {value!r}")
-        respell_table(value)
+        if name == "respell":
+            from umf.text import respell_table
+
+            respell_table(value)
         return
     if kind.startswith("tuple"):
         if not isinstance(value, tuple | list) or not value:

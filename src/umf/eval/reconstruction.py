@@ -58,9 +58,9 @@ def reconstruct(
         mu, _ = vae.encode(x, mask)
         y = normalizer.denormalize(vae.decode(mu, mask))
         # as the pipeline decodes: positions made consistent with velocities, per clip
-        cfg = vae.cfg
-        root = cfg.root_fusion if root_fusion is None else root_fusion
-        y = [fuse_positions(y[j, : f.shape[0]], cfg.position_fusion, root, cfg.height_fusion)
+        position, root, height = vae.cfg.fusion_weights()
+        root = root if root_fusion is None else root_fusion
+        y = [fuse_positions(y[j, : f.shape[0]], position, root, height)
              for j, f in enumerate(chunk)]  # fmt: skip
         out.extend(r.cpu().numpy() for r in y)
     return out

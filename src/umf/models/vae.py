@@ -182,13 +182,10 @@ class MotionVAE(nn.Module):
         self.decoder = SkipTransformer(cfg, cross=True)
         self.out_proj = nn.Linear(d, k * self.space_dim)
 
-    def encoder_modules(self) -> list[nn.Module]:
-        """Everything that maps a motion to its latent (frozen by a decoder-only fine-tune,
-        so the latents the flows were trained on stay exactly what they were)."""
-        return [self.in_proj, self.encoder, self.adapter]
-
     def freeze_encoder(self) -> None:
-        for module in self.encoder_modules():
+        """Hold everything that maps a motion to its latent (a decoder-only fine-tune: the
+        latents the flows were trained on stay exactly what they were)."""
+        for module in (self.in_proj, self.encoder, self.adapter):
             module.requires_grad_(False)
         self.query_tokens.requires_grad_(False)
 

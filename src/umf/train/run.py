@@ -296,7 +296,8 @@ def train_stage(
     if stage not in STAGES:
         raise UMFError(f"unknown stage {stage!r} (choose {', '.join(STAGES)})")
     check_run_config(cfg)
-    if init is not None and resume and best_or_last(run_dir / stage) is not None:
+    resuming = resume and best_or_last(run_dir / stage) is not None
+    if init is not None and resuming:
         log(f"{stage}: resuming the run's own checkpoint; --init {init} is not used")
         init = None
     if init is not None:
@@ -309,7 +310,6 @@ def train_stage(
         cfg = dataclasses.replace(cfg, text=dataclasses.replace(cfg.text, respell=respell))
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
-    resuming = resume and best_or_last(run_dir / stage) is not None
     if stage == "vae" and t.decoder_only and init is None and not resuming:
         raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
     if stage == "vae" and init is not None and not t.decoder_only:
