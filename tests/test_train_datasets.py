@@ -14,6 +14,7 @@ from umf.representation import (
     FEATURE_DIM,
     POS,
     ROT,
+    VEL,
     assemble_features,
     features_to_joints,
     heading_angle,
@@ -238,6 +239,130 @@ def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
     for bad in (-1.0, 2.0):
         with pytest.raises(UMFError, match="balance_labels must be between 0 and 1"):
             D.SingleMotionDataset(corpus, "train", None, balance=bad)
+
+
+def _standing(frames: int = 40, seed: int = 0) -> np.ndarray:
+    rng = np.random.default_rng(seed)
+    base = rng.normal(size=(1, 22, 3))
+    return np.repeat(base, frames, axis=0) + rng.normal(scale=1e-4, size=(frames, 22, 3))
+
+
+def test_ends_at_rest_needs_a_still_pelvis_and_still_feet():
+    still = _standing()
+    assert D.ends_at_rest(still)
+    waving = still.copy()  # the arms may move: gestures are cut while the hands come down
+    waving[:, [18, 19, 20, 21]] += np.linspace(0, 1.0, len(waving))[:, None, None]
+    assert D.ends_at_rest(waving)
+    for joints in ([0], [7], [11]):  # pelvis, left ankle, right toe: 0.3 m/s over the end
+        moving = still.copy()
+        moving[-11:, joints, 2] += np.arange(11)[:, None] * 0.01
+        assert not D.ends_at_rest(moving), joints
+    early = still.copy()  # moved before the last ten frames, still during them
+    early[:-11, 0, 2] += np.arange(len(early) - 11) * 0.05
+    assert D.ends_at_rest(early)
+    assert not D.ends_at_rest(still[:1])
+
+
+def test_hold_rest_serves_short_clips_at_rest_whole_then_held(corpus):
+    clips = {c.id: c for c in corpus.split_clips("train")}
+    longest = max(c.num_frames for c in clips.values())
+    lo, hi = longest + 10, longest + 40  # every clip is shorter than the shortest crop
+    plain = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False)
+    held = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False, hold_rest=True)
+    assert not plain.extended
+    expected = {(c.id, p) for c in clips.values() for p in range(c.num_people)
+                if D.ends_at_rest(c.joints[p])}  # fmt: skip
+    assert held.extended == dict.fromkeys(expected, 0) and 0 < len(expected) < len(held.items)
+    for i, (clip, person, _) in enumerate(held.items):
+        a, b = plain[i], held[i]
+        n = clip.num_frames - 1  # frames a crop of the whole clip has (one more for velocity)
+        assert a["length"] == n and a["start"] == 0  # as before: the whole clip, no more
+        if (clip.id, person) not in expected:
+            torch.testing.assert_close(a["features"], b["features"])
+            continue
+        assert b["start"] == 0 and lo <= b["length"] <= hi
+        assert b["caption"] in clip.captions
+        f = b["features"].double()
+        torch.testing.assert_close(f[:n], a["features"].double())  # the clip itself first
+        tail = f[n:]
+        torch.testing.assert_close(tail[:, VEL], torch.zeros_like(tail[:, VEL]))
+        torch.testing.assert_close(tail[:, POS], tail[:1, POS].expand_as(tail[:, POS]))
+    # a crop length is drawn per epoch, and the rest of the item's draws stay its own
+    key = next(i for i, (c, p, _) in enumerate(held.items) if (c.id, p) in expected)
+    lengths = set()
+    for epoch in range(6):
+        held.set_epoch(epoch)
+        lengths.add(held[key]["length"])
+    assert len(lengths) > 1
+
+
+def test_repeat_gait_carries_short_walks_on(corpus):
+    clips = {c.id: c for c in corpus.split_clips("train")}
+    longest = max(c.num_frames for c in clips.values())
+    lo, hi = longest + 10, longest + 40
+    ds = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False, hold_rest=True,
+                               repeat_gait=True)  # fmt: skip
+    gaits = {k: v for k, v in ds.extended.items() if v}
+    assert gaits and all(not D.ends_at_rest(clips[c].joints[p]) for c, p in gaits)
+    assert all(v == 0 for k, v in ds.extended.items() if D.ends_at_rest(clips[k[0]].joints[k[1]]))
+    for i, (clip, person, _) in enumerate(ds.items):
+        period = gaits.get((clip.id, person))
+        if not period:
+            continue
+        it = ds[i]
+        assert it["start"] == 0 and lo <= it["length"] <= hi
+        joints = features_to_joints(it["features"].double()).numpy()
+        src = np.asarray(clip.joints[person], dtype=np.float64)
+        step = np.linalg.norm(src[-1, 0, [0, 2]] - src[-1 - period, 0, [0, 2]]) / period
+        n = clip.num_frames
+        moved = np.linalg.norm(joints[n - 1 + period, 0, [0, 2]] - joints[n - 1, 0, [0, 2]])
+        assert moved == pytest.approx(step * period, abs=1e-3)  # one more cycle of travel
+        assert step * 30 >= D.GAIT_SPEED
+
+
+def _tiled_walk(corpus, cycle: int = 24, frames: int = 200) -> np.ndarray:
+    """An exactly periodic walk: one stretch of ``cycle`` frames of a real walk, repeated and
+    carried on along the floor by the stretch's own travel."""
+    walks = [c for s in ("train", "val", "test") for c in corpus.split_clips(s) if "_walk_" in c.id]
+    walk = max(walks, key=lambda c: c.num_frames).joints[0]
+    piece = np.asarray(walk[40 : 40 + cycle], dtype=np.float64)
+    travel = (walk[40 + cycle, 0] - walk[40, 0]) * np.array([1.0, 0.0, 1.0])
+    return np.concatenate([piece + k * travel for k in range(frames // cycle + 1)])[:frames]
+
+
+def test_extended_frames_hold_or_repeat_the_last_cycle():
+    src, cycles = D.extended_frames(10, 7, 16)  # held
+    assert src.tolist() == [7, 8, 9, 9, 9, 9, 9, 9, 9] and not cycles.any()
+    src, cycles = D.extended_frames(10, 7, 17, period=3)  # frames 7, 8, 9 then 7, 8, 9, ...
+    assert src.tolist() == [7, 8, 9, 7, 8, 9, 7, 8, 9, 7]
+    assert cycles.tolist() == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3]
+    src, cycles = D.extended_frames(10, 2, 6, period=3)  # inside the clip: untouched
+    assert src.tolist() == [2, 3, 4, 5] and not cycles.any()
+
+
+def test_repeating_the_last_cycle_continues_a_periodic_walk_exactly(corpus):
+    walk = _tiled_walk(corpus, cycle=24, frames=200)
+    cut = walk[:70]
+    assert D.gait_period(cut) == 24
+    np.testing.assert_allclose(D.extend_joints(cut, 0, 200, 24), walk, atol=1e-9)
+    np.testing.assert_allclose(D.extend_joints(cut, 50, 120, 24), walk[50:120], atol=1e-9)
+    assert D.extend_joints(cut, 0, 200, 24).dtype == cut.dtype
+    held = D.extend_joints(cut, 0, 100)
+    np.testing.assert_array_equal(held[70:], np.repeat(cut[-1:], 30, axis=0))
+
+
+def test_gait_period_wants_a_steady_straight_travelling_cycle(corpus):
+    walk = _tiled_walk(corpus, cycle=24, frames=70)
+    assert D.gait_period(walk) == 24
+    assert D.gait_period(walk, match=1.0) == 24
+    assert D.gait_period(_standing(70), match=1.0) == 0  # still: no travel
+    assert D.gait_period(walk[:20]) == 0  # shorter than the shortest cycle
+    jittered = walk + np.random.default_rng(0).normal(scale=0.1, size=walk.shape)
+    assert D.gait_period(jittered) == 0  # the last pose matches no earlier one
+    # turning: each frame yawed a little further about the last pelvis position
+    yaws = np.linspace(0, math.radians(120), len(walk))  # 26 degrees or more per cycle
+    turned = np.stack([yaw_rotate(f, a) for f, a in zip(walk, yaws, strict=True)])
+    assert D.gait_period(turned, match=1.0) == 0
 
 
 # --------------------------------------------------------------------- scenes

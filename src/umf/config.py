@@ -223,6 +223,13 @@ class TrainConfig:
     # give half the training captions the other spelling of direction words (backwards <->
     # backward, forwards <-> forward, towards <-> toward; umf.train.datasets.respell_caption)
     respell_captions: bool = False
+    # single-person clips shorter than min_frames whose body ends at rest are held in their
+    # last pose up to a full crop (umf.train.datasets.ends_at_rest): the flow learns that a
+    # gesture ends standing, not what the latent of absent frames decodes to
+    hold_rest: bool = False
+    # and those that end in a steady, straight gait repeat their last cycle up to a full crop
+    # (umf.train.datasets.gait_period): a 4 s run keeps running instead of slowing to a glide
+    repeat_gait: bool = False
     # VAE only: train the decoder and hold the encoder (and so every latent, and the flows
     # trained on them) fixed; needs a VAE to start from (`umf train vae --init MODEL`)
     decoder_only: bool = False

@@ -9,6 +9,16 @@ Frames of reference (decided here, used by every stage):
 * The VAE additionally sees ``random_placement``: a random yaw in [-pi, pi) and an XZ
   offset within ``placement_radius`` metres (:func:`place_features`), because it must
   encode person 2..N too, who start anywhere facing anywhere.
+* Short clips: a flow trained on the latents of clips shorter than its crops never sees
+  the latent tokens past a clip's end stand for anything, and what it makes past the
+  usual length of a label follows no data: a 4 s "raise both hands" (real clips: 2.4 s)
+  glides off after 2 s, a 4 s run (real: 2.3 s) slows to a glide. Two options extend a
+  single-person clip shorter than the shortest crop to a full crop where that can be done
+  truthfully, as the scene composer already holds people whose clips end early
+  (:func:`umf.data.scenes.time_layout`): ``hold_rest`` holds the last pose of a clip that
+  ends with the body at rest (:func:`ends_at_rest`); ``repeat_gait`` repeats the last
+  cycle of one that ends in a steady, straight gait (:func:`gait_period`), carried on along
+  the path it travelled. Other clips are served as they are.
 * Mirroring (p = 0.5) flips the motion left/right and swaps the side words of the caption
   (:func:`mirror_caption`); a canonical crop stays canonical when mirrored.
 
@@ -29,7 +39,7 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
-from umf.data.clip import MotionClip
+from umf.data.clip import FPS, MotionClip
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.representation import (
@@ -45,6 +55,7 @@ from umf.representation import (
     mirror_features,
 )
 from umf.rotations import yaw_matrix
+from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import swap_words, word_pattern
 
 Tensor = torch.Tensor
@@ -142,6 +153,85 @@ def crop_window(
     return int(rng.integers(0, total - length + 1)), length
 
 
+REST_FRAMES = 10  # the last frames of a clip that decide whether it ends at rest
+REST_SPEED = 0.15  # m/s: pelvis and feet slower than this over them (a body not travelling)
+
+
+def ends_at_rest(
+    joints: np.ndarray, fps: float = FPS, frames: int = REST_FRAMES, speed: float = REST_SPEED
+) -> bool:
+    """Whether one person's joints (T, 22, 3) end standing: the pelvis and both feet (ankles,
+    toes) move slower than ``speed`` on average over the last ``frames`` frames. The arms may
+    still move (the Bandai gestures are cut while the hands come down)."""
+    j = np.asarray(joints, dtype=np.float64)[-(frames + 1) :]
+    if len(j) < 2:
+        return False
+    body = j[:, [0, *FOOT_LEFT, *FOOT_RIGHT]]  # pelvis, ankles and toes
+    return bool(np.linalg.norm(np.diff(body, axis=0), axis=-1).mean(axis=0).max() * fps < speed)
+
+
+GAIT_FRAMES = (15, 45)  # a gait cycle: 0.5 to 1.5 s at 30 fps
+GAIT_MATCH = 0.05  # m: mean joint distance of the last pose to the pose one cycle earlier
+GAIT_TURN = math.radians(15)  # most heading change over the cycle (turns are not repeated)
+GAIT_SPEED = 0.3  # m/s: least travel over the cycle (a gait goes somewhere; gestures do not)
+
+
+def gait_period(
+    joints: np.ndarray,
+    frames: tuple[int, int] = GAIT_FRAMES,
+    match: float = GAIT_MATCH,
+    turn: float = GAIT_TURN,
+    speed: float = GAIT_SPEED,
+    fps: float = FPS,
+) -> int:
+    """Frames in the last cycle of one person's joints (T, 22, 3); 0 where the clip does not
+    end in a steady, straight cycle. The period is the lag in ``frames`` at which the
+    pelvis-relative pose best matches the last pose (a step to the other foot does not: left
+    and right differ); it counts when that mean joint distance is under ``match`` metres,
+    the heading turned less than ``turn`` radians and the pelvis travelled at ``speed`` m/s
+    or more over it."""
+    j = np.asarray(joints, dtype=np.float64)
+    rel = j - j[:, :1]
+    lags = range(frames[0], min(frames[1], len(j) - 1) + 1)
+    if not lags:
+        return 0
+    err = [float(np.linalg.norm(rel[-1] - rel[-1 - lag], axis=-1).mean()) for lag in lags]
+    lag = lags[int(np.argmin(err))]
+    if min(err) > match:
+        return 0
+    yaw = heading_angle(torch.from_numpy(j[[-1 - lag, -1]])).numpy()
+    turned = abs((yaw[1] - yaw[0] + math.pi) % (2 * math.pi) - math.pi)
+    travel = float(np.linalg.norm(j[-1, 0, [0, 2]] - j[-1 - lag, 0, [0, 2]])) * fps / lag
+    return lag if turned < turn and travel >= speed else 0
+
+
+def extended_frames(
+    num_frames: int, start: int, stop: int, period: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Frames ``start .. stop - 1`` of a clip of ``num_frames`` frames, extended past its
+    end: (source frame, cycles added) per frame. ``period`` 0 holds the last frame (cycles
+    0); ``period`` P repeats the last P frames, the k-th repeat moved by k times the travel
+    of one cycle."""
+    t = np.arange(start, stop)
+    past = np.maximum(t - (num_frames - 1), 0)  # frames past the last one
+    if not period:
+        return np.minimum(t, num_frames - 1), np.zeros(len(t))
+    src = np.where(past > 0, num_frames - 1 - period + (past - 1) % period + 1, t)
+    return src, np.where(past > 0, (past - 1) // period + 1, 0).astype(np.float64)
+
+
+def extend_joints(joints: np.ndarray, start: int, stop: int, period: int = 0) -> np.ndarray:
+    """Joints (stop - start, 22, 3) of frames ``start .. stop - 1`` of one person's joints
+    (T, 22, 3) extended past the end (:func:`extended_frames`): held, or repeating the last
+    ``period`` frames, each repeat carried on by the pelvis's floor travel over the cycle."""
+    j = np.asarray(joints)
+    src, cycles = extended_frames(len(j), start, stop, period)
+    if not period:
+        return j[src]
+    travel = (j[-1, 0] - j[-1 - period, 0]) * np.array([1.0, 0.0, 1.0])
+    return (j[src] + cycles[:, None, None] * travel).astype(j.dtype)
+
+
 def item_rng(seed: int, epoch: int, index: int) -> np.random.Generator:
     """The generator of one item: a function of (seed, epoch, index) only."""
     return np.random.default_rng([seed % 2**63, epoch, index])
@@ -153,16 +243,26 @@ def _check_frames(min_frames: int, max_frames: int) -> None:
 
 
 def _clip_crop(
-    clip: MotionClip, tf: RigidTransform, people: Sequence[int], start: int, length: int
+    clip: MotionClip,
+    tf: RigidTransform,
+    people: Sequence[int],
+    start: int,
+    length: int,
+    period: int = 0,
 ):
-    """Features (len(people), length, 262) of a crop, in the clip's floored frame."""
+    """Features (len(people), length, 262) of a crop, in the clip's floored frame; frames
+    past the clip's end hold its last pose (``period`` 0) or repeat its last ``period``."""
     if clip.rot6d is None:
         raise UMFError(f"{clip.id}: no rotations; load clips through a prepared corpus")
-    stop = start + length + 1  # one more joint frame gives the last velocity
+    # one more joint frame gives the last velocity; frames past the clip's end are held or
+    # repeat its last cycle (extended_frames)
+    stop = start + length + 1
+    frames, _ = extended_frames(clip.num_frames, start, stop, period)
     out = []
     for p in people:
-        joints = tf.apply(torch.from_numpy(np.ascontiguousarray(clip.joints[p, start:stop])))
-        out.append(assemble_features(joints, torch.from_numpy(clip.rot6d[p, start:stop])))
+        joints = extend_joints(clip.joints[p], start, stop, period)
+        joints = tf.apply(torch.from_numpy(np.ascontiguousarray(joints)))
+        out.append(assemble_features(joints, torch.from_numpy(clip.rot6d[p, frames])))
     return torch.stack(out)
 
 
@@ -229,6 +329,10 @@ class SingleMotionDataset(_EpochDataset):
     serves raw features (for inspection). ``balance`` > 0 repeats the items of rare content
     labels (:func:`label_repeats`); each repeat draws its own crop, mirror and caption.
     ``respell`` gives half the captions their other spelling (:func:`respell_caption`).
+    ``hold_rest`` / ``repeat_gait``: clips shorter than ``min_frames`` that end at rest / in
+    a steady gait are served whole, then held / their last cycle repeated, up to a crop
+    length in [min_frames, max_frames] (module notes); ``extended`` maps (clip id, person) to
+    the period repeated (0: held).
     """
 
     def __init__(
@@ -244,6 +348,8 @@ class SingleMotionDataset(_EpochDataset):
         placement_radius: float = PLACEMENT_RADIUS,
         balance: float = 0.0,
         respell: bool = False,
+        hold_rest: bool = False,
+        repeat_gait: bool = False,
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
@@ -262,6 +368,15 @@ class SingleMotionDataset(_EpochDataset):
             self.items.extend((clip, p, tf) for p in range(clip.num_people))
         if not self.items:
             raise UMFError(f"{corpus.root}: no clips in split {split!r}")
+        # items extended past their end: shorter than every crop, ending at rest or in a gait
+        self.extended: dict[tuple[str, int], int] = {}
+        for clip, p, _ in self.items if hold_rest or repeat_gait else ():
+            if clip.num_frames - 1 >= min_frames:
+                continue
+            if hold_rest and ends_at_rest(clip.joints[p]):
+                self.extended[clip.id, p] = 0
+            elif repeat_gait and (period := gait_period(clip.joints[p])):
+                self.extended[clip.id, p] = period
         if balance:
             labels = [clip.meta.get("content") for clip, _, _ in self.items]
             repeats = label_repeats(labels, balance)
@@ -275,9 +390,13 @@ class SingleMotionDataset(_EpochDataset):
     def __getitem__(self, index: int) -> dict[str, Any]:
         clip, person, tf = self.items[index]
         rng = self._rng(index)
-        start, length = crop_window(rng, clip.num_frames - 1, self.min_frames, self.max_frames)
+        period = self.extended.get((clip.id, person))
+        if period is not None:  # the whole clip, then held or its last cycle repeated
+            start, length = 0, int(rng.integers(self.min_frames, self.max_frames + 1))
+        else:
+            start, length = crop_window(rng, clip.num_frames - 1, self.min_frames, self.max_frames)
         caption = clip.captions[int(rng.integers(len(clip.captions)))] if clip.captions else ""
-        f = canonicalize_features(_clip_crop(clip, tf, [person], start, length))[0]
+        f = canonicalize_features(_clip_crop(clip, tf, [person], start, length, period or 0))[0]
         if self.random_placement:
             yaw = float(rng.uniform(-math.pi, math.pi))
             dx, dz = rng.uniform(-self.placement_radius, self.placement_radius, size=2)

@@ -112,7 +112,8 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
             place = train and stage == "vae"
             ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
-                                     **common)  # fmt: skip
+                                     hold_rest=train and t.hold_rest,
+                                     repeat_gait=train and t.repeat_gait, **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
         bank = None
