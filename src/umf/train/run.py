@@ -110,10 +110,11 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         common = dict(mirror=train, seed=t.seed, respell=train and t.respell_captions, **frames)
         if kind == "single":
             place = train and stage == "vae"
+            # hold_rest / repeat_gait define the target, so validation is extended too
             ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
-                                     hold_rest=train and t.hold_rest,
-                                     repeat_gait=train and t.repeat_gait, **common)  # fmt: skip
+                                     hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
+                                     **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
         bank = None

@@ -1,0 +1,100 @@
+"""How generated people move second by second: does the motion hold up past a label's usual length?
+
+Each prompt gives ``--samples`` people (``--seconds`` long, seed 0, raw decoded motion: the
+draws of ``scripts/motion_stats_report.py``). Per model and prompt, one row of medians over
+the people of each second's mean pelvis floor speed and mean root-relative ankle speed
+(m/s). A standing gesture should stay near the real clips' pelvis speed (hand-raisers:
+0.03) in every second, a run should keep running; with ``--corpus`` a last column gives
+the median length of the real clips of the prompt's label (``umf.eval.motion_stats.LABELS``).
+Cells read "pelvis / ankles".
+
+    python scripts/speed_over_time.py MODEL_DIR [MODEL_DIR ...]
+        [--prompt "A person raises both hands." ...] [--seconds 4] [--corpus out/corpus]
+"""
+
+from __future__ import annotations
+
+import argparse
+from collections.abc import Sequence
+
+import numpy as np
+import torch
+
+from umf.eval import motion_stats as MS
+
+PROMPTS = (
+    "A person raises both hands.",
+    "A person runs forward.",
+    "A person walks backward.",
+    "Someone bows politely.",
+    "Someone waves with the right hand.",
+)
+
+
+def per_second(people: Sequence[np.ndarray], fps: float = 30.0) -> tuple[list[float], list[float]]:
+    """Medians over people (each (T, 22, 3)) of each whole second's mean pelvis floor speed
+    and mean root-relative ankle speed (m/s); T frames make round(T / fps) seconds (T frames
+    have T - 1 steps: the last second may be a step short)."""
+    pelvis, ankles = [], []
+    for j in people:
+        j = np.asarray(j, dtype=np.float64)
+        sec = int(fps)
+        n = max(round(len(j) / fps), 1)
+        v = np.linalg.norm(np.diff(j[:, MS.PELVIS, [0, 2]], axis=0), axis=-1) * fps
+        rel = j[:, [MS.L_ANKLE, MS.R_ANKLE]] - j[:, None, MS.PELVIS]
+        a = np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean(axis=1) * fps
+        pelvis.append([v[i * sec : (i + 1) * sec].mean() for i in range(n)])
+        ankles.append([a[i * sec : (i + 1) * sec].mean() for i in range(n)])
+    return (np.median(pelvis, axis=0).tolist(), np.median(ankles, axis=0).tolist())
+
+
+def label_of(prompt: str) -> str | None:
+    return next((label for label, (p, _) in MS.LABELS.items() if p == prompt), None)
+
+
+def format_row(name: str, prompt: str, pelvis: list[float], ankles: list[float],
+               real: str | None = None) -> str:  # fmt: skip
+    """One table row: "pelvis / ankles" per second, then ``real`` (a last column) if given."""
+    cells = " | ".join(f"{p:.2f} / {a:.2f}" for p, a in zip(pelvis, ankles, strict=True))
+    return f"| {name} | {prompt} | {cells}" + ("" if real is None else f" | {real}") + " |"
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("models", nargs="+")
+    ap.add_argument("--prompt", action="append", help="a prompt (repeat); default: five labels")
+    ap.add_argument("--samples", type=int, default=16)
+    ap.add_argument("--seconds", type=float, default=4.0)
+    ap.add_argument("--corpus", help="prepared corpus: add the real clips' median length")
+    args = ap.parse_args()
+    if args.samples < 1 or not 1 <= args.seconds <= 10:
+        ap.error("need --samples >= 1 and 1 <= --seconds <= 10")
+    torch.set_num_threads(2)
+    from umf.pipeline import UMFPipeline
+
+    prompts = args.prompt or list(PROMPTS)
+    lengths: dict[str, float] = {}
+    if args.corpus:
+        from umf.data.corpus import Corpus
+
+        real = MS.real_joints_by_label(Corpus.load(args.corpus))
+        lengths = {k: float(np.median([len(j) for j in v])) for k, v in real.items()}
+    secs = int(args.seconds)
+    head = "| model | prompt | " + " | ".join(f"second {i + 1}" for i in range(secs))
+    print(head + (" | real clips (median) |" if args.corpus else " |"))
+    print("|---|---|" + "---:|" * (secs + bool(args.corpus)))
+    for path in args.models:
+        pipe = UMFPipeline.from_pretrained(path)
+        for prompt in prompts:
+            scenes = pipe([prompt] * args.samples, num_people=1, seconds=args.seconds, seed=0,
+                          fit=False)  # fmt: skip
+            pelvis, ankles = per_second([s.raw_joints[0] for s in scenes])
+            real = None
+            if args.corpus:
+                frames = lengths.get(label_of(prompt) or "")
+                real = "—" if frames is None else f"{frames / 30:.1f} s"
+            print(format_row(path, prompt, pelvis, ankles, real), flush=True)
+
+
+if __name__ == "__main__":
+    main()
