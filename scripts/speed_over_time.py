@@ -31,15 +31,17 @@ PROMPTS = (
 )
 
 
-def per_second(people: Sequence[np.ndarray], fps: float = 30.0) -> tuple[list[float], list[float]]:
-    """Medians over people (each (T, 22, 3)) of each whole second's mean pelvis floor speed
-    and mean root-relative ankle speed (m/s); T frames make round(T / fps) seconds (T frames
-    have T - 1 steps: the last second may be a step short)."""
+def per_second(
+    people: Sequence[np.ndarray], fps: float = 30.0, seconds: int | None = None
+) -> tuple[list[float], list[float]]:
+    """Medians over people (each (T, 22, 3)) of each second's mean pelvis floor speed and
+    mean root-relative ankle speed (m/s), for ``seconds`` seconds (default round(T / fps);
+    T frames have T - 1 steps, so the last second may be a step short)."""
     pelvis, ankles = [], []
     for j in people:
         j = np.asarray(j, dtype=np.float64)
-        sec = int(fps)
-        n = max(round(len(j) / fps), 1)
+        sec = round(fps)
+        n = seconds if seconds is not None else max(round(len(j) / fps), 1)
         v = np.linalg.norm(np.diff(j[:, MS.PELVIS, [0, 2]], axis=0), axis=-1) * fps
         rel = j[:, [MS.L_ANKLE, MS.R_ANKLE]] - j[:, None, MS.PELVIS]
         a = np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean(axis=1) * fps
@@ -64,11 +66,11 @@ def main() -> None:
     ap.add_argument("models", nargs="+")
     ap.add_argument("--prompt", action="append", help="a prompt (repeat); default: five labels")
     ap.add_argument("--samples", type=int, default=16)
-    ap.add_argument("--seconds", type=float, default=4.0)
+    ap.add_argument("--seconds", type=int, default=4, help="whole seconds, 1-10")
     ap.add_argument("--corpus", help="prepared corpus: add the real clips' median length")
     args = ap.parse_args()
-    if args.samples < 1 or not 1 <= args.seconds <= 10:
-        ap.error("need --samples >= 1 and 1 <= --seconds <= 10")
+    if args.samples < 1 or args.seconds not in range(1, 11):
+        ap.error("need --samples >= 1 and --seconds a whole number from 1 to 10")
     torch.set_num_threads(2)
     from umf.pipeline import UMFPipeline
 
@@ -79,20 +81,21 @@ def main() -> None:
 
         real = MS.real_joints_by_label(Corpus.load(args.corpus))
         lengths = {k: float(np.median([len(j) for j in v])) for k, v in real.items()}
-    secs = int(args.seconds)
+    secs = args.seconds
     head = "| model | prompt | " + " | ".join(f"second {i + 1}" for i in range(secs))
     print(head + (" | real clips (median) |" if args.corpus else " |"))
     print("|---|---|" + "---:|" * (secs + bool(args.corpus)))
     for path in args.models:
         pipe = UMFPipeline.from_pretrained(path)
         for prompt in prompts:
-            scenes = pipe([prompt] * args.samples, num_people=1, seconds=args.seconds, seed=0,
+            scenes = pipe([prompt] * args.samples, num_people=1, seconds=float(secs), seed=0,
                           fit=False)  # fmt: skip
-            pelvis, ankles = per_second([s.raw_joints[0] for s in scenes])
+            pelvis, ankles = per_second([s.raw_joints[0] for s in scenes], pipe.config.fps,
+                                        secs)  # fmt: skip
             real = None
             if args.corpus:
                 frames = lengths.get(label_of(prompt) or "")
-                real = "—" if frames is None else f"{frames / 30:.1f} s"
+                real = "—" if frames is None else f"{frames / pipe.config.fps:.1f} s"
             print(format_row(path, prompt, pelvis, ankles, real), flush=True)
 
 

@@ -12,7 +12,7 @@ Frames of reference (decided here, used by every stage):
 * Short clips: a flow trained on the latents of clips shorter than its crops never sees
   the latent tokens past a clip's end stand for anything, and what it makes past the
   usual length of a label follows no data: a 4 s "raise both hands" (real clips: 2.4 s)
-  glides off after 2 s, a 4 s run (real: 2.3 s) slows to a glide. Two options extend a
+  glides off after 2 s, a 4 s run (real clips: 3.2 s) slows to a glide. Two options extend a
   single-person clip shorter than the shortest crop to a full crop where that can be done
   truthfully, as the scene composer already holds people whose clips end early
   (:func:`umf.data.scenes.time_layout`): ``hold_rest`` holds the last pose of a clip that
@@ -212,6 +212,8 @@ def extended_frames(
     end: (source frame, cycles added) per frame. ``period`` 0 holds the last frame (cycles
     0); ``period`` P repeats the last P frames, the k-th repeat moved by k times the travel
     of one cycle."""
+    if not 0 <= period < num_frames:
+        raise ValueError(f"period {period} must be in [0, {num_frames - 1}] ({num_frames} frames)")
     t = np.arange(start, stop)
     past = np.maximum(t - (num_frames - 1), 0)  # frames past the last one
     if not period:
