@@ -34,20 +34,16 @@ PROMPTS = (
 def per_second(
     people: Sequence[np.ndarray], fps: float = 30.0, seconds: int | None = None
 ) -> tuple[list[float], list[float]]:
-    """Medians over people (each (T, 22, 3)) of each second's mean pelvis floor speed and
-    mean root-relative ankle speed (m/s), for ``seconds`` seconds (default round(T / fps);
-    T frames have T - 1 steps, so the last second may be a step short)."""
-    pelvis, ankles = [], []
-    for j in people:
-        j = np.asarray(j, dtype=np.float64)
-        sec = round(fps)
-        n = seconds if seconds is not None else max(round(len(j) / fps), 1)
-        v = np.linalg.norm(np.diff(j[:, MS.PELVIS, [0, 2]], axis=0), axis=-1) * fps
-        rel = j[:, [MS.L_ANKLE, MS.R_ANKLE]] - j[:, None, MS.PELVIS]
-        a = np.linalg.norm(np.diff(rel, axis=0), axis=-1).mean(axis=1) * fps
-        pelvis.append([v[i * sec : (i + 1) * sec].mean() for i in range(n)])
-        ankles.append([a[i * sec : (i + 1) * sec].mean() for i in range(n)])
-    return (np.median(pelvis, axis=0).tolist(), np.median(ankles, axis=0).tolist())
+    """Medians over people (each (T, 22, 3)) of each second's ``pelvis_speed`` and
+    ``ankle_energy`` (``umf.eval.motion_stats``: mean pelvis floor speed, mean root-relative
+    ankle speed, m/s), for ``seconds`` seconds (default round(T / fps); T frames have T - 1
+    steps, so the last second may be a step short)."""
+    sec = round(fps)
+    n = seconds if seconds is not None else max(round(len(people[0]) / fps), 1)
+    rows = [MS.median_statistics([j[i * sec : (i + 1) * sec + 1] for j in people],
+                                 ("pelvis_speed", "ankle_energy"), fps)
+            for i in range(n)]  # fmt: skip
+    return [r[0] for r in rows], [r[1] for r in rows]
 
 
 def label_of(prompt: str) -> str | None:

@@ -176,6 +176,27 @@ GAIT_TURN = math.radians(15)  # most heading change over the cycle (turns are no
 GAIT_SPEED = 0.3  # m/s: least travel over the cycle (a gait goes somewhere; gestures do not)
 
 
+def last_cycle(
+    joints: np.ndarray, frames: tuple[int, int] = GAIT_FRAMES, fps: float = FPS
+) -> tuple[int, float, float, float]:
+    """The last cycle of one person's joints (T, 22, 3): (lag, seam m, turn rad, travel m/s).
+    The lag in ``frames`` is the one at which the pelvis-relative pose best matches the last
+    pose (a step to the other foot does not: left and right differ); the seam is that mean
+    joint distance, the turn the heading change and the travel the pelvis's floor speed over
+    the lag. Lag 0 (and the rest 0) when the clip is shorter than the shortest lag."""
+    j = np.asarray(joints, dtype=np.float64)
+    rel = j - j[:, :1]
+    lags = range(frames[0], min(frames[1], len(j) - 1) + 1)
+    if not lags:
+        return 0, 0.0, 0.0, 0.0
+    err = [float(np.linalg.norm(rel[-1] - rel[-1 - lag], axis=-1).mean()) for lag in lags]
+    lag = lags[int(np.argmin(err))]
+    yaw = heading_angle(torch.from_numpy(j[[-1 - lag, -1]])).numpy()
+    turned = abs((yaw[1] - yaw[0] + math.pi) % (2 * math.pi) - math.pi)
+    travel = float(np.linalg.norm(j[-1, 0, [0, 2]] - j[-1 - lag, 0, [0, 2]])) * fps / lag
+    return lag, min(err), float(turned), travel
+
+
 def gait_period(
     joints: np.ndarray,
     frames: tuple[int, int] = GAIT_FRAMES,
@@ -185,24 +206,26 @@ def gait_period(
     fps: float = FPS,
 ) -> int:
     """Frames in the last cycle of one person's joints (T, 22, 3); 0 where the clip does not
-    end in a steady, straight cycle. The period is the lag in ``frames`` at which the
-    pelvis-relative pose best matches the last pose (a step to the other foot does not: left
-    and right differ); it counts when that mean joint distance is under ``match`` metres,
-    the heading turned less than ``turn`` radians and the pelvis travelled at ``speed`` m/s
-    or more over it."""
-    j = np.asarray(joints, dtype=np.float64)
-    rel = j - j[:, :1]
-    lags = range(frames[0], min(frames[1], len(j) - 1) + 1)
-    if not lags:
+    end in a steady, straight cycle: the :func:`last_cycle` counts when its seam is at most
+    ``match`` metres, its turn under ``turn`` radians and its travel ``speed`` m/s or more."""
+    lag, seam, turned, travel = last_cycle(joints, frames, fps)
+    return lag if lag and seam <= match and turned < turn and travel >= speed else 0
+
+
+def extension_period(
+    joints: np.ndarray, min_frames: int, hold_rest: bool, repeat_gait: bool
+) -> int | None:
+    """How one person's clip (T, 22, 3) is extended to a crop of ``min_frames`` feature
+    frames: None (long enough, or neither option fits: served as it is), 0 (its last pose
+    held: ``hold_rest`` and :func:`ends_at_rest`) or P (its last P frames repeated:
+    ``repeat_gait`` and :func:`gait_period`)."""
+    if len(joints) - 1 >= min_frames:
+        return None
+    if hold_rest and ends_at_rest(joints):
         return 0
-    err = [float(np.linalg.norm(rel[-1] - rel[-1 - lag], axis=-1).mean()) for lag in lags]
-    lag = lags[int(np.argmin(err))]
-    if min(err) > match:
-        return 0
-    yaw = heading_angle(torch.from_numpy(j[[-1 - lag, -1]])).numpy()
-    turned = abs((yaw[1] - yaw[0] + math.pi) % (2 * math.pi) - math.pi)
-    travel = float(np.linalg.norm(j[-1, 0, [0, 2]] - j[-1 - lag, 0, [0, 2]])) * fps / lag
-    return lag if turned < turn and travel >= speed else 0
+    if repeat_gait and (period := gait_period(joints)):
+        return period
+    return None
 
 
 def extended_frames(
@@ -372,13 +395,11 @@ class SingleMotionDataset(_EpochDataset):
             raise UMFError(f"{corpus.root}: no clips in split {split!r}")
         # items extended past their end: shorter than every crop, ending at rest or in a gait
         self.extended: dict[tuple[str, int], int] = {}
-        for clip, p, _ in self.items if hold_rest or repeat_gait else ():
-            if clip.num_frames - 1 >= min_frames:
-                continue
-            if hold_rest and ends_at_rest(clip.joints[p]):
-                self.extended[clip.id, p] = 0
-            elif repeat_gait and (period := gait_period(clip.joints[p])):
-                self.extended[clip.id, p] = period
+        if hold_rest or repeat_gait:
+            for clip, p, _ in self.items:
+                period = extension_period(clip.joints[p], min_frames, hold_rest, repeat_gait)
+                if period is not None:
+                    self.extended[clip.id, p] = period
         if balance:
             labels = [clip.meta.get("content") for clip, _, _ in self.items]
             repeats = label_repeats(labels, balance)

@@ -1,0 +1,82 @@
+"""Which short training clips ``train_*.hold_rest`` and ``repeat_gait`` extend, per label.
+
+A clip shorter than the shortest crop (``--min-frames`` feature frames) is held in its last
+pose (ends at rest), has its last cycle repeated (ends in a steady, straight gait) or is
+served as it is (``umf.train.datasets.extension_period``, the dataset's own choice). Prints
+one row per content label, then the seam and turn of the repeated cycles
+(``umf.train.datasets.last_cycle``) and the median length of each label's short clips.
+
+    python scripts/short_clips.py [--corpus out/corpus] [--split train] [--min-frames 140]
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from collections import Counter, defaultdict
+
+import numpy as np
+
+from umf.train.datasets import extension_period, last_cycle
+
+KINDS = ("held", "cycle repeated", "as is")
+
+
+def classify(clips, min_frames: int) -> tuple[dict[str, Counter], list[tuple[float, float]], dict]:
+    """Per label, how its short people are extended; (seam m, turn rad) of every repeated
+    cycle; per label, the lengths (frames) of its short people."""
+    kinds: dict[str, Counter] = defaultdict(Counter)
+    seams: list[tuple[float, float]] = []
+    lengths: dict[str, list[int]] = defaultdict(list)
+    for clip in clips:
+        label = str(clip.meta.get("content", "?"))
+        for joints in clip.joints:
+            if len(joints) - 1 >= min_frames:
+                continue
+            period = extension_period(joints, min_frames, hold_rest=True, repeat_gait=True)
+            kinds[label][KINDS[2] if period is None else KINDS[0] if period == 0 else KINDS[1]] += 1
+            lengths[label].append(len(joints))
+            if period:
+                _, seam, turn, _ = last_cycle(joints)
+                seams.append((seam, turn))
+    return kinds, seams, lengths
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--corpus", default="out/corpus")
+    ap.add_argument("--split", default="train")
+    ap.add_argument("--min-frames", type=int, default=140)
+    args = ap.parse_args()
+    from umf.data.corpus import Corpus
+
+    clips = Corpus.load(args.corpus).split_clips(args.split)
+    kinds, seams, lengths = classify(clips, args.min_frames)
+    people = sum(len(c.joints) for c in clips)
+    total = Counter()
+    for c in kinds.values():
+        total.update(c)
+    print(
+        f"{args.split}: {people} people, {sum(total.values())} shorter than "
+        f"{args.min_frames + 1} frames: " + ", ".join(f"{total[k]} {k}" for k in KINDS)
+    )
+    print("\n| label | short | " + " | ".join(KINDS) + " | median length (s) |")
+    print("|---|---:|" + "---:|" * (len(KINDS) + 1))
+    for label, c in sorted(kinds.items(), key=lambda kv: -sum(kv[1].values())):
+        med = np.median(lengths[label]) / 30
+        print(
+            f"| {label} | {sum(c.values())} | "
+            + " | ".join(str(c[k]) for k in KINDS)
+            + f" | {med:.1f} |"
+        )
+    if seams:
+        s, t = np.array(seams).T
+        print(
+            f"\nrepeated cycles: seam median {np.median(s) * 100:.1f} cm, max "
+            f"{s.max() * 100:.1f} cm; turn median {math.degrees(np.median(t)):.1f}, max "
+            f"{math.degrees(t.max()):.1f} degrees"
+        )
+
+
+if __name__ == "__main__":
+    main()
