@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+import pytest
 import torch
 
 from umf.eval import motion_stats as MS
@@ -77,6 +78,51 @@ def test_a_still_pose_fails_a_wave_and_a_wave_passes():
     rows = MS.compare_label("wave-right-hand", real, real[:6])
     assert all(r.passed for r in rows)
     assert MS.few_real_clips(rows) == {}
+
+
+def test_swings_count_turns_of_at_least_ten_centimetres():
+    t = np.arange(121) / FPS  # 4 s
+    wave = 0.2 * np.sin(2 * np.pi * 1.0 * t)  # 40 cm side to side, once a second
+    assert MS.swings_per_second(wave) == pytest.approx(8 / 4)  # turns at 0.25, 0.75 ... 3.75 s
+    assert MS.swings_per_second(0.2 * np.sin(2 * np.pi * 2.0 * t)) == pytest.approx(16 / 4)
+    assert MS.swings_per_second(0.04 * np.sin(2 * np.pi * 1.0 * t)) == 0  # an 8 cm wobble
+    assert MS.swings_per_second(0.5 * t) == 0  # a one-way drift turns nowhere
+    noise = np.random.default_rng(0).normal(0, 0.01, 121)
+    assert MS.swings_per_second(noise) == 0  # a 1 cm tremor
+    assert MS.swings_per_second(wave + noise) == pytest.approx(8 / 4)
+    assert MS.swings_per_second(np.r_[0.0, 0.3, 0.0, 0.3, 0.0], fps=1.0) == pytest.approx(3 / 4)
+
+
+def test_sideways_is_across_the_facing_direction():
+    w = still()
+    w[:, MS.R_WRIST, 0] += 0.2 * np.sin(np.arange(120) / 5)  # faces +Z: X is sideways
+    y = MS.sideways(w)
+    np.testing.assert_allclose(y - y[0], w[:, MS.R_WRIST, 0] - w[0, MS.R_WRIST, 0], atol=1e-9)
+    fwd = still()
+    fwd[:, MS.R_WRIST, 2] += 0.2 * np.sin(np.arange(120) / 5)  # forward-back: not sideways
+    assert np.ptp(MS.sideways(fwd)) < 1e-9
+    turned = w @ np.array([[0.0, 0, -1], [0, 1, 0], [1, 0, 0]])  # the same wave, facing +X
+    np.testing.assert_allclose(np.abs(MS.sideways(turned) - MS.sideways(turned)[0]),
+                               np.abs(y - y[0]), atol=1e-6)  # fmt: skip
+
+
+def test_a_raised_hand_that_wobbles_is_not_a_wave():
+    """It moves as fast as a slow real wave but never swings 10 cm: the swings fail it."""
+    rng = np.random.default_rng(0)
+    t = np.arange(120) / FPS
+    real = []
+    for _ in range(12):
+        w = still()
+        w[:, MS.R_WRIST, 1] = w[0, MS.HEAD, 1] + 0.3
+        w[:, MS.R_WRIST, 0] += rng.uniform(0.1, 0.2) * np.sin(2 * np.pi * rng.uniform(0.8, 1.6) * t)
+        real.append(w)
+    wobble = still()
+    wobble[:, MS.R_WRIST, 1] = wobble[0, MS.HEAD, 1] + 0.3
+    wobble[:, MS.R_WRIST, 0] += 0.04 * np.sin(2 * np.pi * 4.0 * t)  # fast, 8 cm
+    rows = {r.stat: r for r in MS.compare_label("wave-right-hand", real, [wobble] * 4)}
+    assert rows["right_wrist_energy"].passed and rows["right_wrist_above_head"].passed
+    assert not rows["right_wrist_swings"].passed
+    assert all(r.passed for r in MS.compare_label("wave-right-hand", real, real[:6]))
 
 
 def test_labels_with_few_real_clips_are_named_and_shown():

@@ -10,7 +10,8 @@ import torch
 from test_denoiser import D_TEXT, make_text, tiny_denoiser
 from umf.config import PFlowConfig
 from umf.flows import EVALS_PER_STEP
-from umf.models.pflow import PFlow, resolve_steps
+from umf.models.denoiser import FROM_CONFIG
+from umf.models.pflow import PFlow, _stage_field, resolve_steps, stage_scales
 from umf.text import TextFeatures
 
 P, R = 16, 8
@@ -125,6 +126,53 @@ def test_sample_without_guidance_and_mode_restored() -> None:
     assert nfe == 5
     with pytest.raises(ValueError, match="uncond"):
         model.sample(text, guidance=2.0)
+
+
+def test_stage_scales_guide_the_finest_stage_on_its_own() -> None:
+    assert stage_scales(PFlowConfig(guidance=2.0, num_stages=3)) == (2.0, 2.0, 2.0)
+    assert stage_scales(PFlowConfig(guidance=3.0, fine_guidance=0.0)) == (3.0, 0.0)
+    assert stage_scales(PFlowConfig(guidance=3.0, fine_guidance=1.0, num_stages=3)) == (
+        3.0, 3.0, None)  # fmt: skip
+    assert stage_scales(PFlowConfig(guidance=1.0, fine_guidance=4.0)) == (None, 4.0)
+    # a scale the caller gives is every stage's (as `--guidance` promises)
+    assert stage_scales(PFlowConfig(guidance=3.0, fine_guidance=0.0), 2.0) == (2.0, 2.0)
+    assert stage_scales(PFlowConfig(guidance=3.0, fine_guidance=0.0), None) == (None, None)
+    assert stage_scales(PFlowConfig(fine_guidance=0.0, num_stages=1)) == (0.0,)
+    with pytest.raises(ValueError, match="fine_guidance"):
+        stage_scales(PFlowConfig(fine_guidance=-1.0), FROM_CONFIG)
+
+
+def test_stage_field_guides_each_stage_with_its_own_scale() -> None:
+    """v_u + s (v_c - v_u) per stage: the coarse stage (2) at scale 3, the fine (1) at 0."""
+
+    def net(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor, text: torch.Tensor):
+        return x * 0 + text[:, None, None] + 10 * stage[:, None, None]
+
+    cond, uncond = {"text": torch.tensor([1.0, 1.0])}, {"text": torch.tensor([0.0, 0.0])}
+    field = _stage_field(net, (3.0, 0.0), cond, uncond)
+    x, t = torch.zeros(2, P, R), torch.zeros(2)
+    coarse = field(x, t, stage=torch.full((2,), 2))
+    fine = field(x, t, stage=torch.full((2,), 1))
+    assert torch.allclose(coarse, torch.full_like(x, 20 + 3.0))  # 20 + 0 + 3 * (1 - 0)
+    assert torch.allclose(fine, torch.full_like(x, 10 + 0.0))  # unconditional
+    plain = _stage_field(net, (None, None), cond, uncond)
+    assert torch.allclose(plain(x, t, stage=torch.full((2,), 1)), torch.full_like(x, 11.0))
+
+
+def test_fine_guidance_changes_only_the_fine_stage() -> None:
+    """Unset, or equal to ``guidance``, it samples exactly as before; otherwise it changes
+    the samples at the same number of evaluations."""
+    text, empty = make_text(3), make_text(1)
+    gen = lambda: torch.Generator().manual_seed(0)  # noqa: E731
+    base, _ = pflow(guidance=2.5).sample(text, empty, generator=gen())
+    same, _ = pflow(guidance=2.5, fine_guidance=2.5).sample(text, empty, generator=gen())
+    assert torch.equal(base, same)
+    other, nfe = pflow(guidance=2.5, fine_guidance=0.0).sample(text, empty, generator=gen())
+    assert nfe == 5 and not torch.allclose(base, other)
+    # the caller's scale overrides both stages
+    c, _ = pflow(guidance=2.5, fine_guidance=0.0).sample(text, empty, guidance=2.5,
+                                                         generator=gen())  # fmt: skip
+    assert torch.equal(c, base)
 
 
 def test_resolve_steps() -> None:

@@ -118,6 +118,10 @@ class PFlowConfig:
     steps: tuple[int, ...] = (45, 5)  # coarse -> fine
     solver: str = "euler"
     guidance: float = 3.0
+    # CFG scale of the finest stage (None: ``guidance``). Guidance pulls every sample
+    # towards what the text makes likely and so shrinks the spread of the fine detail the
+    # last stage adds (a wave's swing); the coarse stages fix what the motion is
+    fine_guidance: float | None = None
     p_uncond: float = 0.1
     # loss scale of the single-person corpus (the authors': 0.1 for HumanML3D's size); the
     # small family uses 1: on Bandai the actions and gestures are in the single clips

@@ -25,6 +25,7 @@ from umf.anchoring import anchor_people
 from umf.config import UMFConfig
 from umf.errors import UMFError
 from umf.kinematics import Bodies, fit_bodies
+from umf.models.denoiser import FROM_CONFIG
 from umf.representation import (
     CONTACT,
     Normalizer,
@@ -270,7 +271,7 @@ class UMFPipeline:
                 uncond,
                 dataset=dataset.to(self.device),
                 steps=req.pflow_steps or self.config.pflow.steps,
-                guidance=self.config.pflow.guidance if guidance is None else guidance,
+                guidance=FROM_CONFIG if guidance is None else guidance,  # per stage
                 generator=gen,
             )
             latents, nfe = [z1], nfe + n

@@ -3,9 +3,11 @@
 Distribution scores (FID, R-precision) come from a learned evaluator and can move with no
 visible change. These statistics are what a person looking at the motion checks: how
 fast the pelvis travels, how far the head drops (a bow), how high the wrists get
-relative to the head (raised hands, a wave) and how much the wrists and ankles move
-(gestures, kicks). A mean pose carried along a path fails them: its head never drops
-and its wrists never rise or move.
+relative to the head (raised hands, a wave), how much the wrists and ankles move
+(gestures, kicks) and how often the right hand swings from side to side by at least
+10 cm (a wave). A mean pose carried along a path fails them: its head never drops and
+its wrists never rise or move. A hand that is raised and wobbles also fails the wave:
+it moves (wrist speed) but does not swing.
 
 For each label, generated motions from the label's prompt are compared with the real
 clips of that label: a statistic passes when the generated median lies within the real
@@ -25,6 +27,7 @@ from umf.representation import facing_direction
 Array = np.ndarray
 
 FEW_REAL = 5  # fewer real clips than this: the range is one or two motions, not a spread
+SWING = 0.10  # m: the least side-to-side travel of a hand between turns that is a swing
 
 HEAD, PELVIS, L_WRIST, R_WRIST, L_ANKLE, R_ANKLE = 15, 0, 20, 21, 7, 8
 
@@ -36,12 +39,37 @@ LABELS: dict[str, tuple[str, tuple[str, ...]]] = {
     "walk-back": ("A person walks backward.", ("pelvis_speed", "backward_speed")),
     "bow": ("Someone bows politely.", ("head_drop", "pelvis_speed")),
     "wave-right-hand": ("Someone waves with the right hand.",
-                        ("right_wrist_above_head", "right_wrist_energy")),
+                        ("right_wrist_above_head", "right_wrist_energy", "right_wrist_swings")),
     "raise-up-both-hands": ("A person raises both hands.",
                             ("both_wrists_above_head", "pelvis_speed")),
     "kick": ("A person kicks.", ("ankle_energy", "ankle_height")),
     "punch": ("A person punches.", ("wrist_energy", "pelvis_speed")),
 }  # fmt: skip
+
+
+def sideways(joints: Array, joint: int = R_WRIST) -> Array:
+    """(T,) offset (m) of ``joint`` from the pelvis along the person's left-right axis at
+    frame 0 (the floor direction perpendicular to its facing), for joints (T, 22, 3)."""
+    j = np.asarray(joints, dtype=np.float64)
+    fwd = facing_direction(torch.from_numpy(j[:1])).numpy()[0, [0, 2]]
+    side = np.array([fwd[1], -fwd[0]])  # the facing turned 90 degrees on the floor
+    return (j[:, joint, [0, 2]] - j[:, PELVIS, [0, 2]]) @ side
+
+
+def swings_per_second(trace: Array, least: float = SWING, fps: float = 30.0) -> float:
+    """Turns per second of a 1-D trace that has moved at least ``least`` since its last
+    turn (a zig-zag filter). A waving hand going left-right-left counts every turn; a
+    tremor, a wobble of a few centimetres or a slow one-way drift counts none."""
+    y = np.asarray(trace, dtype=np.float64)
+    turns, going = 0, 0  # going: +1 up, -1 down, 0 not yet moved by ``least``
+    hi = lo = float(y[0])
+    for v in y[1:]:
+        hi, lo = max(hi, v), min(lo, v)
+        if going >= 0 and hi - v >= least:
+            turns, going, hi, lo = turns + (going == 1), -1, v, v
+        elif going <= 0 and v - lo >= least:
+            turns, going, hi, lo = turns + (going == -1), 1, v, v
+    return turns / max((len(y) - 1) / fps, 1e-9)
 
 
 def motion_statistics(joints: Array, fps: float = 30.0) -> dict[str, float]:
@@ -68,6 +96,7 @@ def motion_statistics(joints: Array, fps: float = 30.0) -> dict[str, float]:
             (np.minimum(j[:, L_WRIST, 1], j[:, R_WRIST, 1]) - head).max()
         ),
         "right_wrist_energy": energy([R_WRIST]),
+        "right_wrist_swings": swings_per_second(sideways(j, R_WRIST), fps=fps),
         "wrist_energy": energy([L_WRIST, R_WRIST]),
         "ankle_energy": energy([L_ANKLE, R_ANKLE]),
         "ankle_height": float(

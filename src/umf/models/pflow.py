@@ -65,6 +65,47 @@ def encode_uncond(net: FlowTransformer, uncond_text: TextFeatures, batch: int) -
     return u.expand(batch, -1)
 
 
+def stage_scales(cfg: PFlowConfig, guidance: GuidanceArg = FROM_CONFIG) -> tuple[float | None, ...]:
+    """CFG scale of each pyramid stage, coarse -> fine (None: the plain conditional model).
+
+    From the config, every stage takes ``guidance`` except the finest, which takes
+    ``fine_guidance`` when set; a ``guidance`` given by the caller applies to every stage.
+    """
+    scale = resolve_guidance(guidance, cfg.guidance)
+    fine = scale
+    if guidance is FROM_CONFIG and cfg.fine_guidance is not None:
+        if not 0.0 <= cfg.fine_guidance:
+            raise ValueError(f"pflow.fine_guidance must be >= 0, got {cfg.fine_guidance}")
+        fine = resolve_guidance(cfg.fine_guidance, cfg.guidance)
+    return (scale,) * (cfg.num_stages - 1) + (fine,)
+
+
+def _stage_field(
+    net: nn.Module,
+    scales: Sequence[float | None],
+    cond: dict[str, Any],
+    uncond: dict[str, Any],
+) -> Callable[..., Tensor]:
+    """The velocity field the pyramid sampler integrates, guided per stage by ``scales``
+    (coarse -> fine; stage K is the coarsest, stage 1 the finest)."""
+
+    def plain(x: Tensor, t: Tensor, **shared: Any) -> Tensor:
+        return net(x, t, **shared, **cond)
+
+    fields: dict[float | None, Callable[..., Tensor]] = {
+        s: plain if s is None else classifier_free_guidance(net, s, cond, uncond)
+        for s in set(scales)
+    }
+    k = len(scales)
+    if len(fields) == 1:
+        return fields[scales[0]]
+
+    def field(x: Tensor, t: Tensor, *, stage: Tensor, **shared: Any) -> Tensor:
+        return fields[scales[k - int(stage[0])]](x, t, stage=stage, **shared)
+
+    return field
+
+
 class PFlow(nn.Module):
     """Pyramidal flow matching over (B, p, r) latents conditioned on text and dataset.
 
@@ -176,22 +217,21 @@ class PFlow(nn.Module):
         text = repeat_text(text, num_samples)
         param = next(self.parameters())
         b = text.tokens.shape[0]
-        scale = resolve_guidance(guidance, self.cfg.guidance)
         with evaluating(self):
             cond: dict[str, Any] = {"text": self.net.encode_text(text)}
             if self.net.num_datasets > 0:
                 ds = torch.as_tensor(dataset, dtype=torch.long, device=param.device)
                 ds = ds.expand(b) if ds.dim() == 0 else ds.repeat_interleave(num_samples)
                 cond["dataset"] = ds
-            field: Callable[..., Tensor] = self.net
-            if scale is not None:
+            scales = stage_scales(self.cfg, guidance)
+            uncond: dict[str, Any] = {}
+            if any(s is not None for s in scales):
                 if uncond_text is None:
                     raise ValueError("classifier-free guidance needs uncond_text")
                 if uncond_text.tokens.shape[0] not in (1, b):
                     uncond_text = repeat_text(uncond_text, num_samples)
                 uncond = {**cond, "text": encode_uncond(self.net, uncond_text, b)}
-                field = classifier_free_guidance(self.net, scale, cond, uncond)
-                cond = {}
+            field = _stage_field(self.net, scales, cond, uncond)
             k = self.pyramid.num_stages
             noise = initial_noise(
                 self.pyramid,
@@ -208,6 +248,5 @@ class PFlow(nn.Module):
                 steps=resolve_steps(self.cfg.steps if steps is None else steps, k),
                 method=solver or self.cfg.solver,  # type: ignore[arg-type]
                 generator=generator,
-                cond=cond,
             )
         return self.latent_norm.denormalize(z), nfe
