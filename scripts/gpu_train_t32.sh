@@ -33,11 +33,16 @@ VAE_OPTS=(
   --set vae.num_tokens=32 --set vae.token_span=5.0
   --set train_vae.max_steps=2000 --set train_vae.batch_size=128 --set train_vae.warmup_steps=300
   --set train_vae.val_every=1000 --set train_vae.ckpt_every=1000 --set train_vae.log_every=25
+  --set train_vae.hold_rest=true --set train_vae.repeat_gait=true
 )
 [ -n "${VAE_MODEL:-}" ] && VAE_OPTS=()  # a carried VAE brings its own options
 OPTS=(
   ${VAE_OPTS[@]+"${VAE_OPTS[@]}"}  # (empty-safe under set -u on old bash too)
   --set pflow.guidance=2.0 --set sflow.guidance=2.0
+  # short clips extended to whole crops, both spellings of direction words (the bundled
+  # model's fine-tunes: results/umf-small-bandai-20261127b)
+  --set train_pflow.hold_rest=true --set train_pflow.repeat_gait=true
+  --set train_pflow.respell_captions=true
   --set train_pflow.max_steps=${FLOW_STEPS:-5000} --set train_sflow.max_steps=${FLOW_STEPS:-5000}
   --set train_pflow.batch_size=512 --set train_sflow.batch_size=512
   --set train_pflow.lr=0.0004 --set train_sflow.lr=0.0004

@@ -175,6 +175,16 @@ def test_fine_guidance_changes_only_the_fine_stage() -> None:
     assert torch.equal(c, base)
 
 
+def test_stage_starts_come_from_the_config() -> None:
+    uniform = pflow().pyramid.windows
+    assert [(w.stage, w.start) for w in uniform] == [(2, 0.0), (1, 0.5)]
+    early = pflow(starts=(0.0, 0.25)).pyramid.windows
+    assert [(w.stage, w.start) for w in early] == [(2, 0.0), (1, 0.25)]
+    assert early[0].end < uniform[0].end  # the coarse stage hands over sooner
+    with pytest.raises(ValueError, match="starts"):
+        pflow(starts=(0.1, 0.5))
+
+
 def test_resolve_steps() -> None:
     assert resolve_steps((45, 5), 2) == (45, 5)
     assert resolve_steps((45, 5), 1) == (50,)

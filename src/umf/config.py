@@ -115,6 +115,10 @@ class PFlowConfig:
     layout: str = "1d"  # "1d" token pyramid or "2d" token grid
     num_stages: int = 2  # 1 = no pyramid (ablation)
     g: float | None = None  # block-noise correlation; None = 1/(b-1)
+    # where each stage starts on the flow's time axis, coarse -> fine (s_K = 0 first);
+    # None = uniform (0, 1/K, ...). An earlier finest stage leaves it more noise to
+    # decide fine detail (a wave's swing) at full resolution
+    starts: tuple[float, ...] | None = None
     steps: tuple[int, ...] = (45, 5)  # coarse -> fine
     solver: str = "euler"
     guidance: float = 3.0

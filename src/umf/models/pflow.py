@@ -126,7 +126,11 @@ class PFlow(nn.Module):
         self.cfg = cfg
         self.num_tokens, self.latent_dim = num_tokens, latent_dim
         self.pyramid = PyramidConfig(
-            layout=cfg.layout, num_stages=cfg.num_stages, num_tokens=num_tokens, g=cfg.g
+            layout=cfg.layout,
+            num_stages=cfg.num_stages,
+            num_tokens=num_tokens,
+            g=cfg.g,
+            starts=cfg.starts,
         )
         self.latent_norm = LatentNormalizer(num_tokens, latent_dim)  # fit by the stage
         self.net = FlowTransformer(

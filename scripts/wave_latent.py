@@ -1,0 +1,224 @@
+"""Where a generated wave loses its swing: the VAE's latent, its decoder, or the P-Flow?
+
+    python scripts/wave_latent.py latents MODEL_DIR [--corpus out/corpus]
+    python scripts/wave_latent.py decode MODEL_DIR [MODEL_DIR ...] [--corpus out/corpus]
+    python scripts/wave_latent.py finetune MODEL_DIR --out DIR [--steps 400] [--label ...]
+
+``latents``: for waves, walks and raised hands, how much the latent changes along time,
+for latents of real training clips (posterior means of their first 4 s) and for latents
+the P-Flow generates from the label's prompt (32 people, 4 s, seed 0): the mean squared
+difference of neighbouring tokens, and the variance of the tokens about their own mean
+(the tokens that stand for those 4 s, either way). A latent that hardly changes along time decodes
+to a held pose.
+
+``decode``: how fast real waves swing (the strongest frequency of the wrist's sideways
+trace, all real waves); then real val + test waves (their first 160 frames) encoded, decoded three
+ways: as they are; with neighbouring token pairs averaged (what the pyramid's coarse stage
+can hold); with every token replaced by the mean token (a latent constant in time). For
+each, the median right-wrist speed and swings per second (``umf.eval.motion_stats``).
+
+``finetune``: trains only the VAE's decoder (the encoder, so every latent, fixed) for
+``--steps`` steps of 32 crops (140-160 frames) of one label's training clips and writes a
+copy of the model with that decoder: if the decoder then reconstructs held-out waves, the
+latent holds the swing and the decoder had not learnt to read it. An experiment, not a
+model to ship (it forgets the other labels).
+"""
+
+from __future__ import annotations
+
+import argparse
+import shutil
+import time
+from pathlib import Path
+
+import numpy as np
+import torch
+
+from umf.eval import motion_stats as MS
+
+LATENT_LABELS = ("wave-right-hand", "walk", "raise-up-both-hands")
+
+
+def swing_frequency(trace: np.ndarray, fps: float = 30.0) -> float:
+    """The strongest frequency (Hz, above 0) of a 1-D trace, by FFT of the Hann-windowed
+    trace less its straight-line trend: how often a waving hand goes back and forth."""
+    y = np.asarray(trace, dtype=np.float64)
+    x = np.arange(len(y))
+    y = y - np.polyval(np.polyfit(x, y, 1), x)
+    power = np.abs(np.fft.rfft(y * np.hanning(len(y)))) ** 2
+    return float(np.fft.rfftfreq(len(y), 1.0 / fps)[1 + power[1:].argmax()])
+
+
+def time_variation(z: torch.Tensor) -> tuple[float, float]:
+    """Latents (B, p, r) -> (mean squared neighbour-token difference, mean variance of the
+    tokens about each latent's own mean token)."""
+    step = (z[:, 1:] - z[:, :-1]).pow(2).mean()
+    spread = (z - z.mean(1, keepdim=True)).pow(2).mean()
+    return float(step), float(spread)
+
+
+def pair_mean(z: torch.Tensor) -> torch.Tensor:
+    """Each pair of neighbouring tokens replaced by its mean (the 1-D pyramid's one-level
+    down then up)."""
+    from umf.flows.pyramid import down_1d, up_1d
+
+    return up_1d(down_1d(z))
+
+
+def time_mean(z: torch.Tensor) -> torch.Tensor:
+    """Every token replaced by the latent's mean token."""
+    return z.mean(1, keepdim=True).expand_as(z)
+
+
+def _vae(path: str):
+    import sys
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from vae_recipe import load_vae
+
+    return load_vae(Path(path).expanduser())
+
+
+def _encode(vae, normalizer, feats: list[np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
+    x = normalizer.normalize(torch.as_tensor(np.stack(feats), dtype=torch.float32))
+    mask = torch.ones(x.shape[:2], dtype=torch.bool)
+    with torch.no_grad():
+        return vae.encode(x, mask)[0], mask
+
+
+def _joints(vae, cfg, normalizer, z: torch.Tensor, mask: torch.Tensor) -> list[np.ndarray]:
+    from umf.representation import features_to_joints, fuse_positions
+
+    with torch.no_grad():
+        y = normalizer.denormalize(vae.decode(z, mask))
+    weights = cfg.vae.fusion_weights()
+    return [features_to_joints(fuse_positions(f, *weights)).numpy() for f in y]
+
+
+def latents(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+    from umf.pipeline import UMFPipeline
+
+    corpus = Corpus.load(args.corpus)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    captured: list[torch.Tensor] = []
+    decode = pipe._decode_raw
+
+    def record(z: torch.Tensor, frames: int) -> torch.Tensor:
+        captured.append(z.detach().clone())
+        return decode(z, frames)
+
+    pipe._decode_raw = record  # type: ignore[method-assign]
+    clips = MS.real_clips_by_label(corpus, splits=("train",), labels=LATENT_LABELS)
+    print("| label | latent | clips or people | neighbour step² | spread² about the mean |")
+    print("|---|---|---:|---:|---:|")
+    for label in LATENT_LABELS:
+        feats = [f for c in clips[label] if len(f := corpus.clip_features(c)[0][:120]) == 120]
+        mu, _ = _encode(pipe.vae, corpus.normalizer, feats[:64])
+        captured.clear()
+        pipe([MS.LABELS[label][0]] * 32, num_people=1, seconds=4.0, seed=0, fit=False)
+        k = round(120 / pipe.config.vae.token_span)  # the tokens of 4 s
+        for name, z in (("real, encoded", mu[:, :k]), ("generated", torch.cat(captured)[:, :k])):
+            step, spread = time_variation(z)
+            print(f"| {label} | {name} | {len(z)} | {step:.3f} | {spread:.3f} |", flush=True)
+
+
+def decode(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+
+    corpus = Corpus.load(args.corpus)
+    clips = MS.real_clips_by_label(corpus, ("val", "test"), ["wave-right-hand"])
+    feats = [f for c in clips["wave-right-hand"]
+             if len(f := corpus.clip_features(c)[0][:160]) == 160]  # fmt: skip
+    stats = ["right_wrist_energy", "right_wrist_swings"]
+    from umf.representation import features_to_joints
+
+    real = [features_to_joints(torch.as_tensor(f, dtype=torch.float32)).numpy() for f in feats]
+    speed, swings = MS.median_statistics(real, stats)
+    print(f"{len(feats)} real val + test waves, 160 frames: right-wrist speed {speed:.2f} m/s, "
+          f"{swings:.2f} swings/s")  # fmt: skip
+    every = MS.real_joints_by_label(corpus, labels=["wave-right-hand"])["wave-right-hand"]
+    hz = [swing_frequency(MS.sideways(j)) for j in every if len(j) >= 60]
+    q = np.percentile(hz, [25, 50, 75])
+    print(
+        f"all {len(hz)} real waves of 2 s or more, whole clips (up to 300 frames): the hand "
+        f"swings at {q[0]:.2f} / {q[1]:.2f} / {q[2]:.2f} Hz (25 / 50 / 75 %)"
+    )
+    print("| model | latent decoded | right-wrist speed (m/s) | swings/s |")
+    print("|---|---|---:|---:|")
+    for path in args.models:
+        vae, cfg = _vae(path)
+        mu, mask = _encode(vae, corpus.normalizer, feats)
+        for name, z in (("as encoded", mu), ("token pairs averaged", pair_mean(mu)),
+                        ("mean token everywhere", time_mean(mu))):  # fmt: skip
+            speed, swings = MS.median_statistics(_joints(vae, cfg, corpus.normalizer, z, mask),
+                                                 stats)  # fmt: skip
+            print(f"| {path} | {name} | {speed:.2f} | {swings:.2f} |", flush=True)
+
+
+def finetune(args: argparse.Namespace) -> None:
+    from safetensors.torch import save_file
+
+    from umf.data.corpus import Corpus
+    from umf.models.vae import vae_losses
+    from umf.train.datasets import SingleMotionDataset
+
+    torch.manual_seed(0)
+    corpus = Corpus.load(args.corpus)
+    vae, cfg = _vae(args.model)
+    vae.freeze_encoder()
+    ds = SingleMotionDataset(corpus, "train", corpus.normalizer, min_frames=140, max_frames=160,
+                             random_placement=True)  # fmt: skip
+    picks = [i for i, (clip, _, _) in enumerate(ds.items) if clip.meta.get("content") == args.label]
+    if not picks:
+        raise SystemExit(f"no training clips of label {args.label!r}")
+    params = [p for p in vae.parameters() if p.requires_grad]
+    opt = torch.optim.AdamW(params, lr=args.lr)
+    rng = np.random.default_rng(0)
+    vae.train()
+    t0 = time.time()
+    for step in range(1, args.steps + 1):
+        batch = ds.collate([ds[int(i)] for i in rng.choice(picks, 32)])
+        out = vae(batch["features"], batch["mask"])
+        loss = vae_losses(out, batch["features"], batch["mask"], corpus.normalizer, cfg.vae,
+                          fps=cfg.fps)["total"]  # fmt: skip
+        opt.zero_grad()
+        loss.backward()
+        torch.nn.utils.clip_grad_norm_(params, 1.0)
+        opt.step()
+        if step % 100 == 0:
+            print(f"step {step}: loss {loss.item():.4f} ({time.time() - t0:.0f} s)", flush=True)
+    out_dir = Path(args.out)
+    tmp = out_dir.with_name(f".{out_dir.name}.tmp")
+    shutil.rmtree(tmp, ignore_errors=True)
+    shutil.copytree(Path(args.model).expanduser(), tmp)
+    state = {k: v.detach().to(torch.float16).contiguous() for k, v in vae.state_dict().items()}
+    save_file(state, str(tmp / "vae.safetensors"))
+    shutil.rmtree(out_dir, ignore_errors=True)
+    tmp.rename(out_dir)
+    print(f"wrote {out_dir} ({len(picks)} training clips of {args.label})")
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    la = sub.add_parser("latents")
+    la.add_argument("model")
+    de = sub.add_parser("decode")
+    de.add_argument("models", nargs="+")
+    ft = sub.add_parser("finetune")
+    ft.add_argument("model")
+    ft.add_argument("--out", required=True)
+    ft.add_argument("--label", default="wave-right-hand", choices=sorted(MS.LABELS))
+    ft.add_argument("--steps", type=int, default=400)
+    ft.add_argument("--lr", type=float, default=2e-4)
+    for p in (la, de, ft):
+        p.add_argument("--corpus", default="out/corpus")
+        p.add_argument("--threads", type=int, default=2)
+    args = ap.parse_args()
+    torch.set_num_threads(args.threads)
+    {"latents": latents, "decode": decode, "finetune": finetune}[args.cmd](args)
+
+
+if __name__ == "__main__":
+    main()
