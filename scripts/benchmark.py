@@ -44,7 +44,8 @@ def flat_pflow(pipe):
 
     from umf.models.pflow import PFlow
 
-    cfg = dataclasses.replace(pipe.config.pflow, num_stages=1)
+    # one stage over the whole time axis, guided like the model's coarse stages
+    cfg = dataclasses.replace(pipe.config.pflow, num_stages=1, starts=None, fine_guidance=None)
     p, r = pipe.vae.latent_shape
     flat = PFlow(cfg, p, r, pipe.text_encoder.dim)
     missing, unexpected = flat.load_state_dict(pipe.pflow.state_dict(), strict=False)

@@ -7,8 +7,8 @@
 randomly placed training crops (one thread) and prints R^2 per body-frame group every 50
 steps: how fast a recipe can learn the pose at all. ``--label wave-right-hand`` takes the
 crops from clips of one label only; every line also gives how much of the real wrists'
-and ankles' root-relative motion energy the reconstruction keeps (1 = all of it; a fresh
-16-token VAE keeps little of a wave's within 600 steps, a 32-token one almost all).
+and ankles' root-relative motion energy the reconstruction keeps (1 = all of it; of a
+wave's, a fresh 16-token VAE keeps 0.61 after 600 steps, a 32-token one 0.99).
 
 ``labels MODEL`` encodes and decodes up to 24 real clips of every label of
 ``umf.eval.motion_stats`` and prints each label's statistics, real vs reconstructed

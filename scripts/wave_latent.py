@@ -27,6 +27,7 @@ model to ship (it forgets the other labels).
 from __future__ import annotations
 
 import argparse
+import json
 import shutil
 import time
 from pathlib import Path
@@ -163,6 +164,9 @@ def finetune(args: argparse.Namespace) -> None:
     from umf.models.vae import vae_losses
     from umf.train.datasets import SingleMotionDataset
 
+    out_dir = Path(args.out).expanduser()
+    if out_dir.exists():
+        raise SystemExit(f"{out_dir} exists: choose another --out (nothing is overwritten)")
     torch.manual_seed(0)
     corpus = Corpus.load(args.corpus)
     vae, cfg = _vae(args.model)
@@ -188,13 +192,14 @@ def finetune(args: argparse.Namespace) -> None:
         opt.step()
         if step % 100 == 0:
             print(f"step {step}: loss {loss.item():.4f} ({time.time() - t0:.0f} s)", flush=True)
-    out_dir = Path(args.out)
     tmp = out_dir.with_name(f".{out_dir.name}.tmp")
     shutil.rmtree(tmp, ignore_errors=True)
     shutil.copytree(Path(args.model).expanduser(), tmp)
     state = {k: v.detach().to(torch.float16).contiguous() for k, v in vae.state_dict().items()}
     save_file(state, str(tmp / "vae.safetensors"))
-    shutil.rmtree(out_dir, ignore_errors=True)
+    fmt = json.loads((tmp / "format.json").read_text())  # reports must not call it the source
+    fmt["name"] = f"{fmt.get('name', 'model')}-decoder-{args.label}-{args.steps}"
+    (tmp / "format.json").write_text(json.dumps(fmt, indent=2) + "\n")
     tmp.rename(out_dir)
     print(f"wrote {out_dir} ({len(picks)} training clips of {args.label})")
 

@@ -1,6 +1,6 @@
 """Does a generated wave wave? The right wrist's side-to-side swing over time, as a picture.
 
-A wave is a fast side-to-side swing of the raised hand (2-3 per second); five still frames
+A wave is a side-to-side swing of the raised hand (about once a second); five still frames
 cannot show it, and a hand held up still looks like a wave in them. This plots, for real
 clips of a label and for people generated from its prompt by each model (4 s, seed 0, raw
 decoded motion: the draws of ``scripts/motion_stats_report.py``), the right wrist's

@@ -27,7 +27,7 @@ ABLATIONS = {
     "single_token": ["vae.num_tokens=1", "pflow.num_stages=1"],
     "no_latent_adapter": ["vae.latent_adapter=false"],
     "heun": ["pflow.solver=heun", "sflow.solver=heun"],
-    "unguided_fine_stage": ["pflow.fine_guidance=0.0"],
+    "unconditional_fine_stage": ["pflow.fine_guidance=0.0"],
     "early_fine_stage": ["pflow.starts=[0,0.25]"],
 }
 

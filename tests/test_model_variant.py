@@ -32,6 +32,10 @@ def test_a_variant_decodes_with_its_options_and_keeps_the_weights(tmp_path):
         mv.write_variant(src, dst, [])
     with pytest.raises(UMFError, match="root_fusion"):  # checked before anything is written
         mv.write_variant(src, tmp_path / "bad", ["vae.root_fusion=oops"])
+    with pytest.raises(UMFError, match="fine_guidance must be between 0"):
+        mv.write_variant(src, tmp_path / "bad", ["pflow.fine_guidance=-1"])
+    with pytest.raises(UMFError, match="starts"):  # a pyramid the model cannot build
+        mv.write_variant(src, tmp_path / "bad", ["pflow.starts=[0.2,0.5]"])
     with pytest.raises(UMFError, match="shape"):  # options the weights cannot take
         mv.write_variant(src, tmp_path / "bad", ["vae.d_model=64"])
     with pytest.raises(UMFError, match="not a model directory"):

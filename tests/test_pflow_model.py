@@ -159,7 +159,7 @@ def test_stage_field_guides_each_stage_with_its_own_scale() -> None:
     assert torch.allclose(plain(x, t, stage=torch.full((2,), 1)), torch.full_like(x, 11.0))
 
 
-def test_fine_guidance_changes_only_the_fine_stage() -> None:
+def test_fine_guidance_unset_or_equal_samples_as_before() -> None:
     """Unset, or equal to ``guidance``, it samples exactly as before; otherwise it changes
     the samples at the same number of evaluations."""
     text, empty = make_text(3), make_text(1)

@@ -11,7 +11,7 @@ from conftest import load_script, prepare_fixture_corpus, save_tiny_model
 from umf.eval import motion_stats as MS
 
 
-def test_a_real_wave_swings_and_its_first_pose_held_does_not(bandai_clips):
+def test_a_real_wave_swings_and_its_middle_pose_held_does_not(bandai_clips):
     clip = next(c for c in bandai_clips if c.meta["content"] == "wave-right-hand")
     wave = np.asarray(clip.joints[0], dtype=np.float64)
     s = MS.motion_statistics(wave)
@@ -19,8 +19,6 @@ def test_a_real_wave_swings_and_its_first_pose_held_does_not(bandai_clips):
     held = np.repeat(wave[len(wave) // 2][None], len(wave), axis=0)  # the hand up, still
     h = MS.motion_statistics(held)
     assert h["right_wrist_swings"] == 0 and h["right_wrist_energy"] == 0
-    rows = {r.stat: r for r in MS.compare_label("wave-right-hand", [wave] * 5, [held])}
-    assert not rows["right_wrist_swings"].passed
 
 
 def test_wrist_trace_plots_real_and_generated(tmp_path, fake_text, monkeypatch, capsys):

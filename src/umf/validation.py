@@ -281,7 +281,8 @@ CHOICES = {
     "family": ("paper", "small"),
 }
 _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every", "seed"}
-_NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion"}  # >= 0
+_NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
+                 "guidance", "fine_guidance"}  # fmt: skip  # >= 0
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
 _FRACTIONS = {"balance_labels"}  # floats in [0, 1]
 

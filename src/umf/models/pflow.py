@@ -69,12 +69,14 @@ def stage_scales(cfg: PFlowConfig, guidance: GuidanceArg = FROM_CONFIG) -> tuple
     """CFG scale of each pyramid stage, coarse -> fine (None: the plain conditional model).
 
     From the config, every stage takes ``guidance`` except the finest, which takes
-    ``fine_guidance`` when set; a ``guidance`` given by the caller applies to every stage.
+    ``fine_guidance`` when set (with one stage, that stage is the finest); a ``guidance``
+    given by the caller applies to every stage. Scale 1 is the plain conditional model
+    (no guidance), scale 0 the unconditional one.
     """
     scale = resolve_guidance(guidance, cfg.guidance)
     fine = scale
     if guidance is FROM_CONFIG and cfg.fine_guidance is not None:
-        if not 0.0 <= cfg.fine_guidance:
+        if cfg.fine_guidance < 0:
             raise ValueError(f"pflow.fine_guidance must be >= 0, got {cfg.fine_guidance}")
         fine = resolve_guidance(cfg.fine_guidance, cfg.guidance)
     return (scale,) * (cfg.num_stages - 1) + (fine,)
@@ -213,10 +215,11 @@ class PFlow(nn.Module):
         """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) on the VAE's
         scale, and the NFE.
 
-        Defaults come from the config; ``guidance`` None or 1.0 disables CFG (then
-        ``uncond_text`` is not needed). The NFE counts guided-field evaluations (one
-        double-batch forward each), ``sum(steps) * evals per solver step``. Runs in eval
-        mode and restores the previous mode.
+        Defaults come from the config (per stage: :func:`stage_scales`); ``guidance`` None
+        or 1.0 disables CFG, and ``uncond_text`` is needed only when some stage is guided.
+        The NFE counts field evaluations, ``sum(steps) * evals per solver step``: one
+        double-batch forward each in a guided stage, one plain forward in an unguided one.
+        Runs in eval mode and restores the previous mode.
         """
         text = repeat_text(text, num_samples)
         param = next(self.parameters())
