@@ -989,7 +989,9 @@ def render_markdown(results: dict[str, Any]) -> str:
     if results.get("motion"):
         out += ["", "## 5. Motion statistics per label (single person)", "",
                 "Generated from each label's prompt (4 s) and compared with the real clips "
-                "of that label (`umf.eval.motion_stats`); a mean pose fails them. "
+                "of that label (`umf.eval.motion_stats`); a mean pose fails them, and a "
+                "raised hand that wobbles fails the wave (right_wrist_swings: turns per "
+                "second after at least 10 cm of side-to-side travel). "
                 "\"<model>, delivered\": the same people as the pipeline hands them out "
                 "(feet anchored, body fitted; section 3).", "",
                 motion_markdown(results["motion"])]  # fmt: skip
