@@ -2,6 +2,7 @@
 
     python scripts/wave_latent.py latents MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py decode MODEL_DIR [MODEL_DIR ...] [--corpus out/corpus]
+    python scripts/wave_latent.py refine MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py finetune MODEL_DIR --out DIR [--steps 400] [--label ...]
 
 ``latents``: for waves, walks and raised hands, how much the latent changes along time,
@@ -16,6 +17,12 @@ trace, all real waves); then real val + test waves (their first 160 frames) enco
 ways: as they are; with neighbouring token pairs averaged (what the pyramid's coarse stage
 can hold); with every token replaced by the mean token (a latent constant in time). For
 each, the median right-wrist speed and swings per second (``umf.eval.motion_stats``).
+
+``refine``: can the P-Flow's fine stage make the swing when the coarse content is right?
+Real val + test waves are encoded, put on the fine stage's path at local time t' (its
+start: a quarter-way: ...; t' = 0 is exactly where the sampler hands over from the coarse
+stage, the token-pair means of the real latent plus noise), and finished by the model with
+its own guidance (10 Euler steps), then decoded: the swings per second that come back.
 
 ``finetune``: trains only the VAE's decoder (the encoder, so every latent, fixed) for
 ``--steps`` steps of 32 crops (140-160 frames) of one label's training clips and writes a
@@ -157,6 +164,57 @@ def decode(args: argparse.Namespace) -> None:
             print(f"| {path} | {name} | {speed:.2f} | {swings:.2f} |", flush=True)
 
 
+@torch.no_grad()
+def refine(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+    from umf.flows import integrate
+    from umf.flows.pyramid import down, up
+    from umf.models.pflow import _stage_field, encode_uncond, stage_scales
+    from umf.pipeline import UMFPipeline
+    from umf.text import respell_prompt
+
+    corpus = Corpus.load(args.corpus)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    pflow, cfg = pipe.pflow, pipe.config
+    clips = MS.real_clips_by_label(corpus, ("val", "test"), ["wave-right-hand"])
+    feats = [f for c in clips["wave-right-hand"]
+             if len(f := corpus.clip_features(c)[0][:160]) == 160]  # fmt: skip
+    mu, mask = _encode(pipe.vae, corpus.normalizer, feats)
+    z1 = pflow.latent_norm.normalize(mu)
+    b = len(z1)
+    prompt = respell_prompt(MS.LABELS["wave-right-hand"][0], cfg.text.respell)
+    net = pflow.net
+    cond = {"text": net.encode_text(pipe.text_encoder.encode([prompt] * b)),
+            "dataset": torch.zeros(b, dtype=torch.long)}  # fmt: skip
+    uncond = {**cond, "text": encode_uncond(net, pipe.text_encoder.encode([""]), b)}
+    field = _stage_field(net, stage_scales(pflow.cfg), cond, uncond)
+    window = pflow.pyramid.window(1)  # the finest stage
+    stage = torch.ones(b, dtype=torch.long)
+    layout = pflow.pyramid.layout
+    gen = torch.Generator().manual_seed(0)
+    eps = torch.randn(z1.shape, generator=gen)
+    start = window.start * up(down(z1, layout), layout) + (1 - window.start) * eps
+
+    def local(x: torch.Tensor, t_local: torch.Tensor) -> torch.Tensor:
+        return field(x, window.global_time(t_local), stage=stage)
+
+    stats = ["right_wrist_energy", "right_wrist_swings"]
+    print(f"{b} real val + test waves, 160 frames; fine stage flow time "
+          f"{window.start:g} -> 1, guidance {stage_scales(pflow.cfg)[-1]}")  # fmt: skip
+    print("| fine stage finished from (local t') | global t | right-wrist speed (m/s) | "
+          "swings/s |")  # fmt: skip
+    print("|---:|---:|---:|---:|")
+    for t0 in (0.0, 0.25, 0.5, 0.75, 1.0):
+        x = t0 * z1 + (1 - t0) * start
+        if t0 < 1.0:
+            x = integrate(local, x, steps=10, t0=t0, t1=1.0).x
+        joints = _joints(pipe.vae, cfg, corpus.normalizer, pflow.latent_norm.denormalize(x),
+                         mask)  # fmt: skip
+        speed, swings = MS.median_statistics(joints, stats)
+        print(f"| {t0:g} | {window.global_time(t0):g} | {speed:.2f} | {swings:.2f} |",
+              flush=True)  # fmt: skip
+
+
 def finetune(args: argparse.Namespace) -> None:
     from safetensors.torch import save_file
 
@@ -211,18 +269,20 @@ def main() -> None:
     la.add_argument("model")
     de = sub.add_parser("decode")
     de.add_argument("models", nargs="+")
+    rf = sub.add_parser("refine")
+    rf.add_argument("model")
     ft = sub.add_parser("finetune")
     ft.add_argument("model")
     ft.add_argument("--out", required=True)
     ft.add_argument("--label", default="wave-right-hand", choices=sorted(MS.LABELS))
     ft.add_argument("--steps", type=int, default=400)
     ft.add_argument("--lr", type=float, default=2e-4)
-    for p in (la, de, ft):
+    for p in (la, de, rf, ft):
         p.add_argument("--corpus", default="out/corpus")
         p.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    {"latents": latents, "decode": decode, "finetune": finetune}[args.cmd](args)
+    {"latents": latents, "decode": decode, "refine": refine, "finetune": finetune}[args.cmd](args)
 
 
 if __name__ == "__main__":
