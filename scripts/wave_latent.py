@@ -78,29 +78,19 @@ def time_mean(z: torch.Tensor) -> torch.Tensor:
     return z.mean(1, keepdim=True).expand_as(z)
 
 
-def _vae(path: str):
-    import sys
-
-    sys.path.insert(0, str(Path(__file__).parent))
-    from vae_recipe import load_vae
-
-    return load_vae(Path(path).expanduser())
-
-
-def _encode(vae, normalizer, feats: list[np.ndarray]) -> tuple[torch.Tensor, torch.Tensor]:
-    x = normalizer.normalize(torch.as_tensor(np.stack(feats), dtype=torch.float32))
-    mask = torch.ones(x.shape[:2], dtype=torch.bool)
+def _encode(pipe, feats: list[np.ndarray]) -> torch.Tensor:
+    """Posterior means (B, p, r) of real features (B, T, 262), as the pipeline encodes."""
+    x = pipe.normalizer.normalize(torch.as_tensor(np.stack(feats), dtype=torch.float32))
     with torch.no_grad():
-        return vae.encode(x, mask)[0], mask
+        return pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
 
 
-def _joints(vae, cfg, normalizer, z: torch.Tensor, mask: torch.Tensor) -> list[np.ndarray]:
-    from umf.representation import features_to_joints, fuse_positions
+def _joints(pipe, z: torch.Tensor, frames: int) -> list[np.ndarray]:
+    """Latents (B, p, r) decoded as the pipeline decodes person 1 -> joints (T, 22, 3)."""
+    from umf.representation import features_to_joints
 
     with torch.no_grad():
-        y = normalizer.denormalize(vae.decode(z, mask))
-    weights = cfg.vae.fusion_weights()
-    return [features_to_joints(fuse_positions(f, *weights)).numpy() for f in y]
+        return [features_to_joints(f).numpy() for f in pipe.decode(z, frames)]
 
 
 def latents(args: argparse.Namespace) -> None:
@@ -122,7 +112,7 @@ def latents(args: argparse.Namespace) -> None:
     print("|---|---|---:|---:|---:|")
     for label in LATENT_LABELS:
         feats = [f for c in clips[label] if len(f := corpus.clip_features(c)[0][:120]) == 120]
-        mu, _ = _encode(pipe.vae, corpus.normalizer, feats[:64])
+        mu = _encode(pipe, feats[:64])
         captured.clear()
         pipe([MS.LABELS[label][0]] * 32, num_people=1, seconds=4.0, seed=0, fit=False)
         k = round(120 / pipe.config.vae.token_span)  # the tokens of 4 s
@@ -133,14 +123,14 @@ def latents(args: argparse.Namespace) -> None:
 
 def decode(args: argparse.Namespace) -> None:
     from umf.data.corpus import Corpus
+    from umf.pipeline import UMFPipeline
+    from umf.representation import features_to_joints
 
     corpus = Corpus.load(args.corpus)
     clips = MS.real_clips_by_label(corpus, ("val", "test"), ["wave-right-hand"])
     feats = [f for c in clips["wave-right-hand"]
              if len(f := corpus.clip_features(c)[0][:160]) == 160]  # fmt: skip
     stats = ["right_wrist_energy", "right_wrist_swings"]
-    from umf.representation import features_to_joints
-
     real = [features_to_joints(torch.as_tensor(f, dtype=torch.float32)).numpy() for f in feats]
     speed, swings = MS.median_statistics(real, stats)
     print(f"{len(feats)} real val + test waves, 160 frames: right-wrist speed {speed:.2f} m/s, "
@@ -155,12 +145,11 @@ def decode(args: argparse.Namespace) -> None:
     print("| model | latent decoded | right-wrist speed (m/s) | swings/s |")
     print("|---|---|---:|---:|")
     for path in args.models:
-        vae, cfg = _vae(path)
-        mu, mask = _encode(vae, corpus.normalizer, feats)
+        pipe = UMFPipeline.from_pretrained(path)
+        mu = _encode(pipe, feats)
         for name, z in (("as encoded", mu), ("token pairs averaged", pair_mean(mu)),
                         ("mean token everywhere", time_mean(mu))):  # fmt: skip
-            speed, swings = MS.median_statistics(_joints(vae, cfg, corpus.normalizer, z, mask),
-                                                 stats)  # fmt: skip
+            speed, swings = MS.median_statistics(_joints(pipe, z, 160), stats)
             print(f"| {path} | {name} | {speed:.2f} | {swings:.2f} |", flush=True)
 
 
@@ -179,7 +168,7 @@ def refine(args: argparse.Namespace) -> None:
     clips = MS.real_clips_by_label(corpus, ("val", "test"), ["wave-right-hand"])
     feats = [f for c in clips["wave-right-hand"]
              if len(f := corpus.clip_features(c)[0][:160]) == 160]  # fmt: skip
-    mu, mask = _encode(pipe.vae, corpus.normalizer, feats)
+    mu = _encode(pipe, feats)
     z1 = pflow.latent_norm.normalize(mu)
     b = len(z1)
     prompt = respell_prompt(MS.LABELS["wave-right-hand"][0], cfg.text.respell)
@@ -208,26 +197,34 @@ def refine(args: argparse.Namespace) -> None:
         x = t0 * z1 + (1 - t0) * start
         if t0 < 1.0:
             x = integrate(local, x, steps=10, t0=t0, t1=1.0).x
-        joints = _joints(pipe.vae, cfg, corpus.normalizer, pflow.latent_norm.denormalize(x),
-                         mask)  # fmt: skip
+        joints = _joints(pipe, pflow.latent_norm.denormalize(x), 160)
         speed, swings = MS.median_statistics(joints, stats)
         print(f"| {t0:g} | {window.global_time(t0):g} | {speed:.2f} | {swings:.2f} |",
               flush=True)  # fmt: skip
 
 
 def finetune(args: argparse.Namespace) -> None:
+    import importlib.util
+
     from safetensors.torch import save_file
 
     from umf.data.corpus import Corpus
     from umf.models.vae import vae_losses
     from umf.train.datasets import SingleMotionDataset
 
+    # the VAE alone, as scripts/vae_recipe.py loads it (a script, not a package module)
+    spec = importlib.util.spec_from_file_location("vae_recipe", Path(__file__).with_name(
+        "vae_recipe.py"))  # fmt: skip
+    recipe = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(recipe)
+    load_vae = recipe.load_vae
+
     out_dir = Path(args.out).expanduser()
     if out_dir.exists():
         raise SystemExit(f"{out_dir} exists: choose another --out (nothing is overwritten)")
     torch.manual_seed(0)
     corpus = Corpus.load(args.corpus)
-    vae, cfg = _vae(args.model)
+    vae, cfg = load_vae(Path(args.model).expanduser())
     vae.freeze_encoder()
     ds = SingleMotionDataset(corpus, "train", corpus.normalizer, min_frames=140, max_frames=160,
                              random_placement=True)  # fmt: skip

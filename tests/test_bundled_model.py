@@ -89,8 +89,8 @@ def test_reconstructed_wave_and_bow(pipe):
     assert (rec[:, 21, 1] - rec[:, 15, 1]).max() > 0.05  # the right hand goes above the head
     from umf.eval.motion_stats import motion_statistics
 
-    # and swings from side to side (10 cm or more, 2.5 times a second in the real clip): the
-    # latent holds a wave and this decoder reads it (results/wave-20261127)
+    # and swings from side to side (turns after 10 cm or more): the latent holds a wave and
+    # this decoder reads it (results/wave-20261127)
     assert motion_statistics(rec)["right_wrist_swings"] > 1.0
     bow = load_motion(SAMPLE1 / "dataset-1_bow_normal_001.bvh").joints[0][:121]
     real, rec = _reconstruct(pipe, bow)

@@ -47,11 +47,17 @@ LABELS: dict[str, tuple[str, tuple[str, ...]]] = {
 }  # fmt: skip
 
 
-def sideways(joints: Array, joint: int = R_WRIST) -> Array:
+def start_facing(joints: Array) -> Array:
+    """(2,) unit floor direction (X, Z) a person (T, 22, 3) faces at frame 0."""
+    return facing_direction(torch.from_numpy(np.asarray(joints[:1]))).numpy()[0, [0, 2]]
+
+
+def sideways(joints: Array, joint: int = R_WRIST, facing: Array | None = None) -> Array:
     """(T,) offset (m) of ``joint`` from the pelvis along the person's left-right axis at
-    frame 0 (the floor direction perpendicular to its facing), for joints (T, 22, 3)."""
+    frame 0 (the floor direction perpendicular to its facing, :func:`start_facing` unless
+    given), for joints (T, 22, 3)."""
     j = np.asarray(joints, dtype=np.float64)
-    fwd = facing_direction(torch.from_numpy(j[:1])).numpy()[0, [0, 2]]
+    fwd = start_facing(j) if facing is None else facing
     side = np.array([fwd[1], -fwd[0]])  # the facing turned 90 degrees on the floor
     return (j[:, joint, [0, 2]] - j[:, PELVIS, [0, 2]]) @ side
 
@@ -85,7 +91,7 @@ def motion_statistics(joints: Array, fps: float = 30.0) -> dict[str, float]:
         return float(np.linalg.norm(np.diff(rel[:, list(idx)], axis=0), axis=-1).mean() * fps)
 
     # facing at the start: travel along it is forward, against it backward
-    fwd = facing_direction(torch.from_numpy(j[:1])).numpy()[0, [0, 2]]
+    fwd = start_facing(j)
     disp = pelvis[-1] - pelvis[0]
     return {
         "pelvis_speed": float(path / dur),
@@ -96,7 +102,7 @@ def motion_statistics(joints: Array, fps: float = 30.0) -> dict[str, float]:
             (np.minimum(j[:, L_WRIST, 1], j[:, R_WRIST, 1]) - head).max()
         ),
         "right_wrist_energy": energy([R_WRIST]),
-        "right_wrist_swings": swings_per_second(sideways(j, R_WRIST), fps=fps),
+        "right_wrist_swings": swings_per_second(sideways(j, R_WRIST, fwd), fps=fps),
         "wrist_energy": energy([L_WRIST, R_WRIST]),
         "ankle_energy": energy([L_ANKLE, R_ANKLE]),
         "ankle_height": float(
