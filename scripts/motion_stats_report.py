@@ -4,10 +4,13 @@
 against the corpus's real clips of that label (``umf.eval.motion_stats``); the same check
 as ``umf eval``'s section 5 without the rest of the evaluation. ``--delivered`` scores the
 people as the default pipeline hands them out instead (feet anchored, bodies fitted: the
-"delivered" rows of ``umf eval``).
+"delivered" rows of ``umf eval``). ``--reconstructed`` scores, instead of generated people,
+the label's real clips (their first 4 s; at most 64 per label, in corpus order, so mostly
+training clips) encoded and decoded by the model's VAE: what its latents can give at best,
+raw or, with ``--delivered``, as the pipeline delivers them.
 
     python scripts/motion_stats_report.py MODEL_DIR [MODEL_DIR ...] [--delivered]
-        [--corpus out/corpus]
+        [--reconstructed] [--corpus out/corpus]
 """
 
 from __future__ import annotations
@@ -18,7 +21,28 @@ import torch
 
 from umf.data.corpus import Corpus
 from umf.eval import motion_stats as MS
-from umf.pipeline import UMFPipeline
+from umf.pipeline import UMFPipeline, delivered_joints
+from umf.representation import CONTACT, features_to_joints
+
+RECONSTRUCTED = 64  # real clips per label
+
+
+def reconstructions(pipe: UMFPipeline, corpus: Corpus, label: str, delivered: bool) -> list:
+    """The label's real clips (first 4 s, at most RECONSTRUCTED) through the VAE: joints
+    (T, 22, 3) each, raw or as the pipeline delivers them."""
+    clips = MS.real_clips_by_label(corpus, labels=[label]).get(label, [])[:RECONSTRUCTED]
+    out = []
+    for clip in clips:
+        f = torch.as_tensor(corpus.clip_features(clip)[0][:120], dtype=torch.float32)
+        x = pipe.normalizer.normalize(f[None])
+        with torch.no_grad():
+            mu = pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
+            decoded = pipe.decode(mu, len(f))[0]
+        joints = features_to_joints(decoded).numpy()
+        if delivered:
+            joints = delivered_joints(joints[None], decoded[None, :, CONTACT].numpy())[0]
+        out.append(joints)
+    return out
 
 
 def main() -> None:
@@ -27,18 +51,25 @@ def main() -> None:
     ap.add_argument("--corpus", default="out/corpus")
     ap.add_argument("--samples", type=int, default=16)
     ap.add_argument("--delivered", action="store_true", help="score the pipeline's output")
+    ap.add_argument("--reconstructed", action="store_true",
+                    help="score the VAE's reconstructions of real clips")  # fmt: skip
     args = ap.parse_args()
     torch.set_num_threads(2)
-    real = MS.real_joints_by_label(Corpus.load(args.corpus))
+    corpus = Corpus.load(args.corpus)
+    real = MS.real_joints_by_label(corpus)
+    by_prompt = {prompt: label for label, (prompt, _) in MS.LABELS.items()}
     for path in args.models:
         pipe = UMFPipeline.from_pretrained(path)
 
         def generate(prompt: str, n: int, pipe: UMFPipeline = pipe) -> list:
+            if args.reconstructed:
+                return reconstructions(pipe, corpus, by_prompt[prompt], args.delivered)
             scenes = pipe([prompt] * n, num_people=1, seconds=4.0, seed=0, fit=args.delivered)
             return [s.joints[0] for s in scenes]  # fit=False: joints are the raw positions
 
         rows = MS.check_labels(real, generate, samples=args.samples)
         kind, passes = ("delivered" if args.delivered else "raw"), MS.label_passes(rows)
+        kind += ", real clips reconstructed" if args.reconstructed else ""
         print(f"## {path} ({kind}): {sum(passes.values())}/{len(passes)}")
         print(MS.format_checks(rows), flush=True)
 

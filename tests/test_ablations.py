@@ -29,6 +29,8 @@ ABLATIONS = {
     "heun": ["pflow.solver=heun", "sflow.solver=heun"],
     "unconditional_fine_stage": ["pflow.fine_guidance=0.0"],
     "early_fine_stage": ["pflow.starts=[0,0.25]"],
+    "detail_norm": ["pflow.detail_norm=true"],
+    "detail_norm_grid": ["pflow.detail_norm=true", "pflow.layout=2d"],
 }
 
 

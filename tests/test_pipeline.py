@@ -427,6 +427,38 @@ def test_a_flow_stage_fine_tunes_from_a_model(trained, tmp_path):
                     init=tmp_path)  # fmt: skip
 
 
+def test_pflow_detail_norm_fine_tunes_from_a_model_without_it(trained, tmp_path):
+    """pflow.detail_norm on a model trained without it: the weights and the latent mean and
+    std are the model's, the detail gains are fitted under them, and the exported model
+    carries and uses them."""
+    from umf.checkpoint import read_weights
+
+    root, _, _ = trained
+    model = save_tiny_model(tmp_path / "source", seed=7)
+    cfg = small_config()
+    tuning = ["train_pflow.lr=0.000000001", "train_pflow.warmup_steps=0",
+              "train_pflow.max_steps=2", "pflow.detail_norm=true"]  # fmt: skip
+    for o in [*TINY, *tuning]:
+        cfg = set_option(cfg, o)
+    run = tmp_path / "ft"
+    train_stage("pflow", root / "corpus", run, cfg, Launch(progress=False), init=model,
+                log=lambda m: None)  # fmt: skip
+    start, tuned = read_weights(model, "pflow"), read_weights(run / "pflow" / "last", "pflow")
+    assert set(tuned) - set(start) == {"latent_norm.detail_gain"}
+    for k in start:
+        assert torch.allclose(tuned[k].float(), start[k].float(), atol=1e-3), k
+    gain = tuned["latent_norm.detail_gain"].float()
+    assert torch.all(gain > 1) and not torch.allclose(gain, gain.mean().expand_as(gain))
+    tuned_model = export_model(run, tmp_path / "tuned", base=model, log=lambda m: None)
+    pipe = UMFPipeline.from_pretrained(tuned_model)
+    assert pipe.config.pflow.detail_norm
+    torch.testing.assert_close(pipe.pflow.latent_norm.detail_gain.float(), gain, rtol=1e-3, atol=0)
+    plain = UMFPipeline.from_pretrained(model)
+    a = pipe("a person walks", num_people=1, seconds=1.0, seed=0)[0].joints
+    b = plain("a person walks", num_people=1, seconds=1.0, seed=0)[0].joints
+    assert np.isfinite(a).all() and not np.allclose(a, b)  # the gains change the samples
+
+
 def test_the_vae_decoder_fine_tunes_alone_from_a_model(trained, tmp_path):
     """--init + train_vae.decoder_only: the VAE starts from the model's weights, its
     encoder (so every latent the flows know) stays bit-identical, the decoder trains."""

@@ -241,6 +241,18 @@ def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
             D.SingleMotionDataset(corpus, "train", None, balance=bad)
 
 
+def test_single_dataset_labels_keep_only_those_clips(corpus, monkeypatch):
+    clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
+    for i, clip in enumerate(clips):
+        monkeypatch.setitem(clip.meta, "content", "wave" if i < 3 else "walk")
+    ds = D.SingleMotionDataset(corpus, "train", None, 20, 60, labels=["wave"])
+    assert sorted(c.id for c, _, _ in ds.items) == sorted(c.id for c in clips[:3])
+    both = D.SingleMotionDataset(corpus, "train", None, 20, 60, labels=["wave", "walk"])
+    assert len(both) == len([c for c in clips])
+    with pytest.raises(UMFError, match=r"unknown content label 'kick' \(known: walk, wave\)"):
+        D.SingleMotionDataset(corpus, "train", None, 20, 60, labels=["kick"])
+
+
 def _standing(frames: int = 40, seed: int = 0) -> np.ndarray:
     rng = np.random.default_rng(seed)
     base = rng.normal(size=(1, 22, 3))

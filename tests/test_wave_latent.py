@@ -23,3 +23,16 @@ def test_wave_latent_measures_change_along_time():
     assert wl.time_variation(wl.time_mean(ramp)) == (0.0, 0.0)
     t = np.arange(150) / 30.0
     assert wl.swing_frequency(0.2 * np.sin(2 * np.pi * 1.2 * t) + 0.5 * t) == pytest.approx(1.2)
+
+
+def test_detail_retention_compares_fine_detail_only():
+    wl = load_script("wave_latent")
+    g = torch.Generator().manual_seed(0)
+    truth = torch.randn(4, 8, 3, generator=g)
+    assert wl.detail_retention(truth, truth) == pytest.approx((1.0, 1.0))
+    coarse = wl.pair_mean(truth)
+    assert wl.detail_retention(coarse, truth) == pytest.approx((0.0, 0.0), abs=1e-12)
+    half = coarse + 0.5 * (truth - coarse)  # half the detail, whatever the pair means do
+    assert wl.detail_retention(half + 3.0, truth) == pytest.approx((0.25, 0.5))
+    flipped = coarse - (truth - coarse)  # as much detail, the wrong way round
+    assert wl.detail_retention(flipped, truth) == pytest.approx((1.0, -1.0))

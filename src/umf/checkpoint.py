@@ -342,12 +342,15 @@ def read_weights(path: str | os.PathLike, name: str) -> dict[str, torch.Tensor]:
 
 
 def checked_weights(
-    path: Path, name: str, module: nn.Module, *, strict: bool = True
+    path: Path, name: str, module: nn.Module, *, strict: bool = True, may_lack: str = ""
 ) -> dict[str, torch.Tensor]:
-    """``<name>.safetensors`` checked against ``module``'s keys and shapes, ready to load."""
+    """``<name>.safetensors`` checked against ``module``'s keys and shapes, ready to load.
+
+    Keys ending in ``may_lack`` (when given) may be missing even when ``strict``.
+    """
     sd = read_weights(path, name)
     own = module.state_dict()
-    missing = [k for k in own if k not in sd]
+    missing = [k for k in own if k not in sd and not (may_lack and k.endswith(may_lack))]
     unexpected = [k for k in sd if k not in own]
     if strict and (missing or unexpected):
         what = "missing" if missing else "unexpected"

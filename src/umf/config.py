@@ -120,6 +120,11 @@ class PFlowConfig:
     # decide fine detail (a wave's swing) at full resolution
     starts: tuple[float, ...] | None = None
     steps: tuple[int, ...] = (45, 5)  # coarse -> fine
+    # also standardise each latent channel's fine detail (a token less the mean of its
+    # pair or block) to unit variance over the training latents. Why: standardised per
+    # token and channel, a wave's swing is 2 % of the latent's variance and sits below the
+    # noise until the last few flow steps, so the flow never makes it (results/wave-20261127)
+    detail_norm: bool = False
     solver: str = "euler"
     guidance: float = 3.0
     # CFG scale of the finest stage (None: ``guidance``). Guidance pulls every sample
@@ -228,6 +233,10 @@ class TrainConfig:
     # labels repeat (most/count)**balance_labels times per epoch, 0 <= balance_labels <= 1
     # (0 = as in the corpus, 1 = every label equal; umf.train.datasets.label_repeats)
     balance_labels: float = 0.0
+    # only single-person clips of these content labels, e.g. [wave-right-hand] (empty: all);
+    # the VAE and P-Flow then train on them alone, without scene batches (a scene's people
+    # carry several labels), so a stage can be fine-tuned or probed on one kind of motion
+    labels: tuple[str, ...] = ()
     # give half the training captions the other spelling of direction words (backwards <->
     # backward, forwards <-> forward, towards <-> toward; umf.train.datasets.respell_caption)
     respell_captions: bool = False

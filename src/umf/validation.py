@@ -298,6 +298,9 @@ def _check_value(where: str, kind: str, value: Any) -> None:
     if kind.startswith("tuple[str"):  # word lists: may be empty
         if not isinstance(value, tuple | list):
             raise UMFError(f"{where} must be a list, got {value!r}")
+        for v in value:
+            if not isinstance(v, str):
+                raise UMFError(f"{where} must be a list of words, got {v!r} in it")
         if name == "respell":
             from umf.text import respell_table
 

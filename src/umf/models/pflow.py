@@ -134,7 +134,9 @@ class PFlow(nn.Module):
             g=cfg.g,
             starts=cfg.starts,
         )
-        self.latent_norm = LatentNormalizer(num_tokens, latent_dim)  # fit by the stage
+        # fit by the stage
+        detail = cfg.layout if cfg.detail_norm else None
+        self.latent_norm = LatentNormalizer(num_tokens, latent_dim, detail_layout=detail)
         self.net = FlowTransformer(
             cfg.denoiser,
             latent_dim,

@@ -345,6 +345,23 @@ def label_repeats(labels: Sequence[Hashable | None], power: float) -> list[int]:
             for label in labels]  # fmt: skip
 
 
+def _with_labels(items: list, labels: Sequence[str], corpus: Corpus, split: str) -> list:
+    """The items whose clip has one of ``labels`` as its content label.
+
+    Why: fine-tuning or probing a stage on one kind of motion (e.g. only waves) without
+    preparing a corpus of its own. Unknown labels are refused, listing the known ones.
+    """
+    known = sorted({str(c.meta["content"]) for c, _, _ in items if c.meta.get("content")})
+    unknown = [label for label in labels if label not in known]
+    if unknown:
+        listed = ", ".join(known) if known else "none: this corpus has no content labels"
+        raise UMFError(f"unknown content label {unknown[0]!r} (known: {listed})")
+    kept = [item for item in items if item[0].meta.get("content") in set(labels)]
+    if not kept:
+        raise UMFError(f"{corpus.root}: no clips labelled {', '.join(labels)} in split {split!r}")
+    return kept
+
+
 # --------------------------------------------------------------------- single person
 class SingleMotionDataset(_EpochDataset):
     """One person's random crop per item, canonical at the crop start (+ optional placement).
@@ -354,6 +371,7 @@ class SingleMotionDataset(_EpochDataset):
     serves raw features (for inspection). ``balance`` > 0 repeats the items of rare content
     labels (:func:`label_repeats`); each repeat draws its own crop, mirror and caption.
     ``respell`` gives half the captions their other spelling (:func:`respell_caption`).
+    ``labels``: only the people of clips with these content labels (all when empty).
     ``hold_rest`` / ``repeat_gait``: clips shorter than ``min_frames`` that end at rest / in
     a steady gait are served whole, then held / their last cycle repeated, up to a crop
     length in [min_frames, max_frames] (module notes); ``extended`` maps (clip id, person) to
@@ -375,6 +393,7 @@ class SingleMotionDataset(_EpochDataset):
         respell: bool = False,
         hold_rest: bool = False,
         repeat_gait: bool = False,
+        labels: Sequence[str] = (),
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
@@ -393,6 +412,8 @@ class SingleMotionDataset(_EpochDataset):
             self.items.extend((clip, p, tf) for p in range(clip.num_people))
         if not self.items:
             raise UMFError(f"{corpus.root}: no clips in split {split!r}")
+        if labels:
+            self.items = _with_labels(self.items, labels, corpus, split)
         # items extended past their end: shorter than every crop, ending at rest or in a gait
         self.extended: dict[tuple[str, int], int] = {}
         if hold_rest or repeat_gait:

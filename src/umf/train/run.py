@@ -77,6 +77,9 @@ def check_run_config(cfg: UMFConfig) -> None:
         if stage != "vae" and getattr(cfg, f"train_{stage}").decoder_only:
             raise UMFError(f"train_{stage}.decoder_only: only the VAE stage has a decoder to "
                            "fine-tune alone")  # fmt: skip
+        if stage in ("sflow", "evaluator") and getattr(cfg, f"train_{stage}").labels:
+            raise UMFError(f"train_{stage}.labels: only the VAE and P-Flow train on "
+                           "single-person clips, which have one content label each")  # fmt: skip
 
 
 def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig:
@@ -114,7 +117,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
             ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
                                      hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
-                                     **common)  # fmt: skip
+                                     labels=t.labels, **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
         bank = None
@@ -133,6 +136,8 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
 
     if stage == "sflow":
         train, val = loader("scene", "train"), loader("scene", "val")
+    elif t.labels:  # one kind of motion: single-person clips only
+        train, val = loader("single", "train"), loader("single", "val")
     else:
         train = MixedBatches(loader("single", "train"), loader("scene", "train"))
         val = MixedBatches(loader("single", "val"), loader("scene", "val"))
@@ -352,8 +357,14 @@ def train_stage(
 
         module = st.trainable()
         own = module.state_dict()
-        module.load_state_dict({k: v.to(own[k].dtype) for k, v in
-                                checked_weights(init, stage, module).items()})  # fmt: skip
+        weights = checked_weights(init, stage, module, may_lack="detail_gain")
+        # a model without detail gains (trained before pflow.detail_norm) keeps the ones
+        # just fitted, refitted under its own latent mean and std
+        fresh = [k for k in own if k.endswith("detail_gain") and k not in weights]
+        weights.update({k: own[k] for k in fresh})
+        module.load_state_dict({k: v.to(own[k].dtype) for k, v in weights.items()})
+        if fresh and latents is not None:
+            module.latent_norm.fit_detail(latents)
         log(f"{stage}: starting from the weights of {init}")
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
     return train(
