@@ -4,6 +4,9 @@
     python scripts/wave_latent.py decode MODEL_DIR [MODEL_DIR ...] [--corpus out/corpus]
     python scripts/wave_latent.py refine MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py finetune MODEL_DIR --out DIR [--steps 400] [--label ...]
+    python scripts/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
+    python scripts/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
+    python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--corpus ...]
 
 ``latents``: for waves, walks and raised hands, how much the latent changes along time,
 for latents of real training clips (posterior means of their first 4 s) and for latents
@@ -29,6 +32,26 @@ its own guidance (10 Euler steps), then decoded: the swings per second that come
 copy of the model with that decoder: if the decoder then reconstructs held-out waves, the
 latent holds the swing and the decoder had not learnt to read it. An experiment, not a
 model to ship (it forgets the other labels).
+
+``detail``: how much of a real latent's fine detail (each token less the mean of its pair:
+what only the finest pyramid stage adds) the P-Flow's fine stage recovers in one step.
+Real val + test clips (first 160 frames, up to 48 per label) are put on the fine stage's
+path at local time t' as in ``refine``, and the model's estimate of the endpoint
+(x + (1 - t') v, no guidance) is compared with the real latent: the estimate's detail
+energy and its projection on the real detail, both relative to the real detail's energy
+(1 and 1: all of it recovered; 0: none).
+
+``perturb``: is the decoder's swing fragile? Real val + test waves' latents with Gaussian
+noise added (in the P-Flow's standardised units: everywhere, in the fine detail only, in
+the pair means only), and with their fine detail shrunk, decoded: wrist speed and swings.
+
+``overfit``: can the P-Flow make a swing at all? It is trained (AdamW, lr 2e-4, batches of
+64) on the latents of ``--clips`` real val + test waves alone (their first 160 frames, or
+with ``--crops K`` K random 160-frame crops of each, canonical at the crop's start as in
+training, so that the swing's phase is random), with the label's prompt, and
+every 200 steps 16 people are sampled with that prompt: the time variation of their
+latents (standardised, the tokens of 4 s) and the decoded wrist speed and swings, against
+the same numbers for the real clips. Nothing is written.
 """
 
 from __future__ import annotations
@@ -203,6 +226,173 @@ def refine(args: argparse.Namespace) -> None:
               flush=True)  # fmt: skip
 
 
+def detail_retention(estimate: torch.Tensor, truth: torch.Tensor) -> tuple[float, float]:
+    """(energy, projection) of an estimate's fine detail relative to the truth's: the
+    estimate's detail energy / the truth's, and <estimate's detail, truth's detail> / the
+    truth's energy. Detail: each token less the mean of its token pair (1-D pyramid)."""
+    d_est, d_true = estimate - pair_mean(estimate), truth - pair_mean(truth)
+    energy = float(d_true.pow(2).sum())
+    return float(d_est.pow(2).sum()) / energy, float((d_est * d_true).sum()) / energy
+
+
+def _real_latents(pipe, corpus, label: str, limit: int | None = None) -> torch.Tensor:
+    """Posterior means of real val + test clips of ``label`` (their first 160 frames)."""
+    clips = MS.real_clips_by_label(corpus, ("val", "test"), [label])[label]
+    feats = [f for c in clips if len(f := corpus.clip_features(c)[0][:160]) == 160]
+    return _encode(pipe, feats[:limit])
+
+
+def _crop_latents(pipe, corpus, label: str, clips: int, crops: int) -> torch.Tensor:
+    """Posterior means of ``crops`` random 160-frame crops of each of the first ``clips``
+    val + test clips of ``label`` at least 160 frames long, each canonical at its own start
+    as the P-Flow's training crops are (not mirrored): the swing's phase at the crop's start
+    is then random, as in training."""
+    from umf.train.datasets import SingleMotionDataset
+
+    kw = dict(min_frames=160, max_frames=160, mirror=False, labels=[label])
+    ds = [SingleMotionDataset(corpus, split, pipe.normalizer, **kw) for split in ("val", "test")]
+    items = [(d, i) for d in ds for i in range(len(d)) if d.items[i][0].num_frames > 160]
+    feats = []
+    for epoch in range(crops):
+        for d, i in items[:clips]:
+            d.set_epoch(epoch)
+            feats.append(d[i]["features"])
+    x = torch.stack(feats).float()
+    with torch.no_grad():
+        return pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
+
+
+def _conditions(pipe, prompt: str, b: int) -> tuple[dict, dict]:
+    from umf.models.pflow import encode_uncond
+    from umf.text import respell_prompt
+
+    net = pipe.pflow.net
+    prompt = respell_prompt(prompt, pipe.config.text.respell)
+    cond = {"text": net.encode_text(pipe.text_encoder.encode([prompt] * b)),
+            "dataset": torch.zeros(b, dtype=torch.long)}  # fmt: skip
+    return cond, {**cond, "text": encode_uncond(net, pipe.text_encoder.encode([""]), b)}
+
+
+def detail(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+    from umf.flows.pyramid import down, up
+    from umf.models.pflow import _stage_field
+    from umf.pipeline import UMFPipeline
+
+    corpus = Corpus.load(args.corpus)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    pflow = pipe.pflow
+    if pflow.pyramid.num_stages < 2 or pflow.pyramid.layout != "1d":
+        raise SystemExit("detail needs a P-Flow with a 1-D pyramid of at least two stages")
+    times = (0.0, 0.25, 0.5, 0.75, 0.9)
+    window = pflow.pyramid.window(1)  # the finest stage
+    print("| label | real detail energy | " + " | ".join(
+        f"t' {t:g} (t {window.global_time(t):.2f})" for t in times) + " |")  # fmt: skip
+    print("|---|---:|" + "---:|" * len(times))
+    for label in ("wave-right-hand", "walk", "raise-up-both-hands", "run"):
+        z1 = pflow.latent_norm.normalize(_real_latents(pipe, corpus, label, 48))
+        b = len(z1)
+        cond, uncond = _conditions(pipe, MS.LABELS[label][0], b)
+        field = _stage_field(pflow.net, (None,) * pflow.pyramid.num_stages, cond, uncond)
+        stage = torch.ones(b, dtype=torch.long)
+        eps = torch.randn(z1.shape, generator=torch.Generator().manual_seed(0))
+        start = window.start * up(down(z1, "1d"), "1d") + (1 - window.start) * eps
+        cells = []
+        for t in times:
+            x = t * z1 + (1 - t) * start
+            with torch.no_grad():
+                v = field(x, torch.full((b,), float(window.global_time(t))), stage=stage)
+            energy, proj = detail_retention(x + (1 - t) * v, z1)
+            cells.append(f"{energy:.2f} / {proj:.2f}")
+        own = float((z1 - pair_mean(z1)).pow(2).mean())
+        print(f"| {label} | {own:.3f} | " + " | ".join(cells) + " |", flush=True)
+
+
+def perturb(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+    from umf.pipeline import UMFPipeline
+
+    corpus = Corpus.load(args.corpus)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    norm = pipe.pflow.latent_norm
+    z1 = norm.normalize(_real_latents(pipe, corpus, "wave-right-hand"))
+    eps = torch.randn(z1.shape, generator=torch.Generator().manual_seed(0))
+    stats = ["right_wrist_energy", "right_wrist_swings"]
+
+    def scored(z: torch.Tensor) -> str:
+        speed, swings = MS.median_statistics(_joints(pipe, norm.denormalize(z), 160), stats)
+        return f"{speed:.2f} m/s, {swings:.2f}/s"
+
+    sigmas = (0.0, 0.1, 0.2, 0.4)
+    print(f"{len(z1)} real val + test waves, 160 frames: right-wrist speed, swings per second")
+    print("| noise added (std, standardised units) | " + " | ".join(f"{s:g}" for s in sigmas)
+          + " |")  # fmt: skip
+    print("|---|" + "---:|" * len(sigmas))
+    fine = (eps - pair_mean(eps)) * 2**0.5  # unit variance per element, like eps
+    for name, noise in (("everywhere", eps), ("fine detail only", fine),
+                        ("pair means only", pair_mean(eps) * 2**0.5)):  # fmt: skip
+        cells = [scored(z1 + s * noise) for s in sigmas]
+        print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
+    print()
+    print("| fine detail kept | 1 | 0.75 | 0.5 | 0.25 |")
+    print("|---|---:|---:|---:|---:|")
+    coarse = pair_mean(z1)
+    cells = [scored(coarse + k * (z1 - coarse)) for k in (1.0, 0.75, 0.5, 0.25)]
+    print("| decoded | " + " | ".join(cells) + " |", flush=True)
+
+
+def overfit(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+    from umf.models.denoiser import expand_text
+    from umf.pipeline import UMFPipeline
+    from umf.text import respell_prompt
+
+    torch.manual_seed(0)
+    corpus = Corpus.load(args.corpus)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    pflow = pipe.pflow.float()
+    if args.crops:
+        mu = _crop_latents(pipe, corpus, "wave-right-hand", args.clips, args.crops)
+    else:
+        mu = _real_latents(pipe, corpus, "wave-right-hand", args.clips)
+    prompt = respell_prompt(MS.LABELS["wave-right-hand"][0], pipe.config.text.respell)
+    text, empty = pipe.text_encoder.encode([prompt]), pipe.text_encoder.encode([""])
+    stats = ["right_wrist_energy", "right_wrist_swings"]
+    k = round(120 / pipe.config.vae.token_span)  # the tokens of 4 s
+
+    def row(name: str, z: torch.Tensor) -> None:
+        step, spread = time_variation(pflow.latent_norm.normalize(z)[:, :k])
+        speed, swings = MS.median_statistics(_joints(pipe, z, 120), stats)
+        print(f"| {name} | {step:.3f} | {spread:.3f} | {speed:.2f} | {swings:.2f} |", flush=True)
+
+    def sampled(name: str) -> None:
+        z, _ = pflow.sample(text, empty, num_samples=16, generator=torch.Generator().manual_seed(1))
+        row(name, z)
+
+    what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"
+    print(f"P-Flow trained on the latents of {what} {args.clips} real val + test waves "
+          f"alone ({len(mu)} latents), prompt {prompt!r}; 4 s, 16 people, seed 1")  # fmt: skip
+    print("| latents | neighbour step² | spread² | right-wrist speed (m/s) | swings/s |")
+    print("|---|---:|---:|---:|---:|")
+    row(f"the {len(mu)} real latents", mu)
+    sampled("generated, before")
+    opt = torch.optim.AdamW(pflow.parameters(), lr=2e-4)
+    batch = 64
+    text_b, empty_b = expand_text(text, batch), expand_text(empty, batch)
+    dataset = torch.zeros(batch, dtype=torch.long)
+    gen = torch.Generator().manual_seed(0)
+    t0 = time.time()
+    for step in range(1, args.steps + 1):
+        pflow.train()
+        idx = torch.randint(0, len(mu), (batch,), generator=gen)
+        loss = pflow.loss(mu[idx], text_b, empty_b, dataset=dataset, generator=gen)["total"]
+        opt.zero_grad()
+        loss.backward()
+        opt.step()
+        if step % 200 == 0:
+            sampled(f"generated, after {step} steps ({time.time() - t0:.0f} s)")
+
+
 def finetune(args: argparse.Namespace) -> None:
     import importlib.util
 
@@ -274,12 +464,28 @@ def main() -> None:
     ft.add_argument("--label", default="wave-right-hand", choices=sorted(MS.LABELS))
     ft.add_argument("--steps", type=int, default=400)
     ft.add_argument("--lr", type=float, default=2e-4)
-    for p in (la, de, rf, ft):
+    dt = sub.add_parser("detail")
+    dt.add_argument("model")
+    pt = sub.add_parser("perturb")
+    pt.add_argument("model")
+    of = sub.add_parser("overfit")
+    of.add_argument("model")
+    of.add_argument("--clips", type=int, default=16)
+    of.add_argument("--steps", type=int, default=600)
+    of.add_argument(
+        "--crops",
+        type=int,
+        default=0,
+        help="random crops per clip (0: each clip's first 160 frames)",
+    )
+    for p in (la, de, rf, ft, dt, pt, of):
         p.add_argument("--corpus", default="out/corpus")
         p.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
-    {"latents": latents, "decode": decode, "refine": refine, "finetune": finetune}[args.cmd](args)
+    commands = {"latents": latents, "decode": decode, "refine": refine, "finetune": finetune,
+                "detail": detail, "perturb": perturb, "overfit": overfit}  # fmt: skip
+    commands[args.cmd](args)
 
 
 if __name__ == "__main__":
