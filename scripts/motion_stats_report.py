@@ -5,9 +5,9 @@ against the corpus's real clips of that label (``umf.eval.motion_stats``); the s
 as ``umf eval``'s section 5 without the rest of the evaluation. ``--delivered`` scores the
 people as the default pipeline hands them out instead (feet anchored, bodies fitted: the
 "delivered" rows of ``umf eval``). ``--reconstructed`` scores, instead of generated people,
-the label's real clips (their first 4 s; at most 64 per label, in corpus order, so mostly
-training clips) encoded and decoded by the model's VAE: what its latents can give at best,
-raw or, with ``--delivered``, as the pipeline delivers them.
+the label's real clips (at most 64 per label, evenly spaced over the corpus, so mostly
+training clips; whole, up to 300 frames) encoded and decoded by the model's VAE: what its
+latents can give at best, raw or, with ``--delivered``, as the pipeline delivers them.
 
     python scripts/motion_stats_report.py MODEL_DIR [MODEL_DIR ...] [--delivered]
         [--reconstructed] [--corpus out/corpus]
@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import argparse
 
+import numpy as np
 import torch
 
 from umf.data.corpus import Corpus
@@ -28,12 +29,17 @@ RECONSTRUCTED = 64  # real clips per label
 
 
 def reconstructions(pipe: UMFPipeline, corpus: Corpus, label: str, delivered: bool) -> list:
-    """The label's real clips (first 4 s, at most RECONSTRUCTED) through the VAE: joints
-    (T, 22, 3) each, raw or as the pipeline delivers them."""
-    clips = MS.real_clips_by_label(corpus, labels=[label]).get(label, [])[:RECONSTRUCTED]
+    """The label's real clips (at most RECONSTRUCTED, evenly spaced over the corpus order,
+    which groups styles; each whole up to 300 frames, as the real range takes them) through
+    the VAE: joints (T, 22, 3) each, raw or as the pipeline delivers them."""
+    clips = MS.real_clips_by_label(corpus, labels=[label]).get(label, [])
+    if len(clips) > RECONSTRUCTED:
+        clips = [
+            clips[i] for i in np.linspace(0, len(clips) - 1, RECONSTRUCTED).round().astype(int)
+        ]
     out = []
     for clip in clips:
-        f = torch.as_tensor(corpus.clip_features(clip)[0][:120], dtype=torch.float32)
+        f = torch.as_tensor(corpus.clip_features(clip)[0][:300], dtype=torch.float32)
         x = pipe.normalizer.normalize(f[None])
         with torch.no_grad():
             mu = pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
