@@ -366,7 +366,8 @@ def overfit(args: argparse.Namespace) -> None:
         print(f"| {name} | {step:.3f} | {spread:.3f} | {speed:.2f} | {swings:.2f} |", flush=True)
 
     def sampled(name: str) -> None:
-        z, _ = pflow.sample(text, empty, num_samples=16, generator=torch.Generator().manual_seed(1))
+        z, _ = pflow.sample(text, empty, num_samples=16, dataset=0,  # single person, as trained
+                            generator=torch.Generator().manual_seed(1))  # fmt: skip
         row(name, z)
 
     what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"

@@ -427,14 +427,30 @@ def test_a_flow_stage_fine_tunes_from_a_model(trained, tmp_path):
                     init=tmp_path)  # fmt: skip
 
 
-def test_pflow_detail_norm_fine_tunes_from_a_model_without_it(trained, tmp_path):
+def test_pflow_detail_norm_fine_tunes_from_a_model_without_it(trained, tmp_path, monkeypatch):
     """pflow.detail_norm on a model trained without it: the weights and the latent mean and
     std are the model's, the detail gains are fitted under them, and the exported model
     carries and uses them."""
+    from safetensors.torch import load_file, save_file
+
     from umf.checkpoint import read_weights
+    from umf.flows.pyramid import down, up
+    from umf.models.latent_normalizer import MAX_DETAIL_GAIN, LatentNormalizer
 
     root, _, _ = trained
     model = save_tiny_model(tmp_path / "source", seed=7)
+    weights = load_file(model / "pflow.safetensors")  # a distinctive latent mean and std
+    weights["latent_norm.mean"] = weights["latent_norm.mean"] + 1.0
+    weights["latent_norm.std"] = weights["latent_norm.std"] * 3.0
+    save_file(weights, str(model / "pflow.safetensors"))
+    seen: list[tuple[torch.Tensor, ...]] = []
+    fit_detail = LatentNormalizer.fit_detail
+
+    def recording(self, z):
+        seen.append((self.mean.clone(), self.std.clone(), z.clone()))
+        return fit_detail(self, z)
+
+    monkeypatch.setattr(LatentNormalizer, "fit_detail", recording)
     cfg = small_config()
     tuning = ["train_pflow.lr=0.000000001", "train_pflow.warmup_steps=0",
               "train_pflow.max_steps=2", "pflow.detail_norm=true"]  # fmt: skip
@@ -445,10 +461,15 @@ def test_pflow_detail_norm_fine_tunes_from_a_model_without_it(trained, tmp_path)
                 log=lambda m: None)  # fmt: skip
     start, tuned = read_weights(model, "pflow"), read_weights(run / "pflow" / "last", "pflow")
     assert set(tuned) - set(start) == {"latent_norm.detail_gain"}
-    for k in start:
+    for k in start:  # lr ~0; the latent mean and std are the model's
         assert torch.allclose(tuned[k].float(), start[k].float(), atol=1e-3), k
+    mean, std, z = seen[-1]  # the last fit: under the model's mean and std
+    torch.testing.assert_close(mean.float(), start["latent_norm.mean"].float())
+    torch.testing.assert_close(std.float(), start["latent_norm.std"].float())
+    x = (z.double() - mean.double()) / std.double()
+    rms = (x - up(down(x, "1d"), "1d")).pow(2).mean(dim=(0, 1)).sqrt()
     gain = tuned["latent_norm.detail_gain"].float()
-    assert torch.all(gain > 1) and not torch.allclose(gain, gain.mean().expand_as(gain))
+    torch.testing.assert_close(gain, (1 / rms).clamp_max(MAX_DETAIL_GAIN).float())
     tuned_model = export_model(run, tmp_path / "tuned", base=model, log=lambda m: None)
     pipe = UMFPipeline.from_pretrained(tuned_model)
     assert pipe.config.pflow.detail_norm

@@ -242,15 +242,20 @@ def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
 
 
 def test_single_dataset_labels_keep_only_those_clips(corpus, monkeypatch):
+    for clip in corpus.clips:
+        monkeypatch.setitem(clip.meta, "content", "walk")
     clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
-    for i, clip in enumerate(clips):
-        monkeypatch.setitem(clip.meta, "content", "wave" if i < 3 else "walk")
+    for clip in clips[:3]:
+        monkeypatch.setitem(clip.meta, "content", "wave")
     ds = D.SingleMotionDataset(corpus, "train", None, 20, 60, labels=["wave"])
     assert sorted(c.id for c, _, _ in ds.items) == sorted(c.id for c in clips[:3])
     both = D.SingleMotionDataset(corpus, "train", None, 20, 60, labels=["wave", "walk"])
-    assert len(both) == len([c for c in clips])
+    assert len(both) == len(D.SingleMotionDataset(corpus, "train", None, 20, 60))
     with pytest.raises(UMFError, match=r"unknown content label 'kick' \(known: walk, wave\)"):
         D.SingleMotionDataset(corpus, "train", None, 20, 60, labels=["kick"])
+    # a label of the corpus that one split lacks: that split's own error, not "unknown"
+    with pytest.raises(UMFError, match="no clips labelled wave in split 'val'"):
+        D.SingleMotionDataset(corpus, "val", None, 20, 60, labels=["wave"])
 
 
 def _standing(frames: int = 40, seed: int = 0) -> np.ndarray:

@@ -345,20 +345,34 @@ def label_repeats(labels: Sequence[Hashable | None], power: float) -> list[int]:
             for label in labels]  # fmt: skip
 
 
-def _with_labels(items: list, labels: Sequence[str], corpus: Corpus, split: str) -> list:
-    """The items whose clip has one of ``labels`` as its content label.
-
-    Why: fine-tuning or probing a stage on one kind of motion (e.g. only waves) without
-    preparing a corpus of its own. Unknown labels are refused, listing the known ones.
-    """
-    known = sorted({str(c.meta["content"]) for c, _, _ in items if c.meta.get("content")})
+def check_labels(corpus: Corpus, labels: Sequence[str]) -> None:
+    """Refuse content labels that no clip of the corpus (any split) has, listing those it
+    has: a typo must not become an empty training set."""
+    known = sorted({str(c.meta["content"]) for c in corpus.clips if c.meta.get("content")})
     unknown = [label for label in labels if label not in known]
     if unknown:
         listed = ", ".join(known) if known else "none: this corpus has no content labels"
         raise UMFError(f"unknown content label {unknown[0]!r} (known: {listed})")
-    kept = [item for item in items if item[0].meta.get("content") in set(labels)]
+
+
+def _with_labels(
+    items: list[tuple[MotionClip, int, RigidTransform]],
+    labels: Sequence[str],
+    corpus: Corpus,
+    split: str,
+) -> list[tuple[MotionClip, int, RigidTransform]]:
+    """The items whose clip has one of ``labels`` as its content label.
+
+    Why: fine-tuning or probing a stage on one kind of motion (e.g. only waves) without
+    preparing a corpus of its own. Labels the corpus lacks are refused, listing its labels;
+    a split without clips of them is an error of its own (training needs validation too).
+    """
+    check_labels(corpus, labels)
+    wanted = set(labels)
+    kept = [item for item in items if str(item[0].meta.get("content")) in wanted]
     if not kept:
-        raise UMFError(f"{corpus.root}: no clips labelled {', '.join(labels)} in split {split!r}")
+        raise UMFError(f"{corpus.root}: no clips labelled {', '.join(labels)} in split "
+                       f"{split!r}; training needs some in train and in val")  # fmt: skip
     return kept
 
 
@@ -422,8 +436,8 @@ class SingleMotionDataset(_EpochDataset):
                 if period is not None:
                     self.extended[clip.id, p] = period
         if balance:
-            labels = [clip.meta.get("content") for clip, _, _ in self.items]
-            repeats = label_repeats(labels, balance)
+            contents = [clip.meta.get("content") for clip, _, _ in self.items]
+            repeats = label_repeats(contents, balance)
             self.items = [
                 item for item, r in zip(self.items, repeats, strict=True) for _ in range(r)
             ]

@@ -27,7 +27,13 @@ from umf.checkpoint import (
 from umf.config import TrainConfig, UMFConfig, family_config, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
-from umf.train.datasets import MixedBatches, SceneDataset, SingleMotionDataset, make_loader
+from umf.train.datasets import (
+    MixedBatches,
+    SceneDataset,
+    SingleMotionDataset,
+    check_labels,
+    make_loader,
+)
 
 STAGES = ("vae", "pflow", "sflow")
 
@@ -317,6 +323,8 @@ def train_stage(
         cfg = dataclasses.replace(cfg, text=dataclasses.replace(cfg.text, respell=respell))
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
+    if t.labels:  # before anything is written: a typo must not stay in the run's config
+        check_labels(corpus, t.labels)
     if stage == "vae" and t.decoder_only and init is None and not resuming:
         raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
     if stage == "vae" and init is not None and not t.decoder_only:
