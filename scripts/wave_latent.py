@@ -51,7 +51,9 @@ with ``--crops K`` K random 160-frame crops of each, canonical at the crop's sta
 training, so that the swing's phase is random), with the label's prompt, and
 every 200 steps 16 people are sampled with that prompt: the time variation of their
 latents (standardised, the tokens of 4 s) and the decoded wrist speed and swings, against
-the same numbers for the real clips. Nothing is written.
+the same numbers for the real clips. ``--fresh WIDTH,LAYERS`` trains a new, untrained
+P-Flow of that width and depth (feed-forward twice the width; the model's latent
+statistics) instead of the model's own. Nothing is written.
 """
 
 from __future__ import annotations
@@ -351,6 +353,20 @@ def overfit(args: argparse.Namespace) -> None:
     corpus = Corpus.load(args.corpus)
     pipe = UMFPipeline.from_pretrained(args.model)
     pflow = pipe.pflow.float()
+    if args.fresh:  # a new, untrained P-Flow of another width and depth (the same latents)
+        import dataclasses
+
+        from umf.models.pflow import PFlow
+
+        width, layers = (int(v) for v in args.fresh.split(","))
+        den = dataclasses.replace(pflow.cfg.denoiser, d_model=width, num_layers=layers,
+                                  ff_dim=2 * width)  # fmt: skip
+        cfg = dataclasses.replace(pflow.cfg, denoiser=den)
+        fresh = PFlow(cfg, pflow.num_tokens, pflow.latent_dim, pipe.text_encoder.dim)
+        fresh.latent_norm.load_state_dict(pflow.latent_norm.state_dict())
+        pflow = fresh
+        size = sum(p.numel() for p in pflow.parameters()) / 1e6
+        print(f"a fresh P-Flow, {width} wide, {layers} layers: {size:.2f} M parameters")
     if args.crops:
         mu = _crop_latents(pipe, corpus, "wave-right-hand", args.clips, args.crops)
     else:
@@ -473,6 +489,8 @@ def main() -> None:
     of.add_argument("model")
     of.add_argument("--clips", type=int, default=16)
     of.add_argument("--steps", type=int, default=600)
+    of.add_argument("--fresh", default="",
+                    help="WIDTH,LAYERS: train a new P-Flow of that size instead")  # fmt: skip
     of.add_argument(
         "--crops",
         type=int,
