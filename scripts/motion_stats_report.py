@@ -22,6 +22,7 @@ import torch
 
 from umf.data.corpus import Corpus
 from umf.eval import motion_stats as MS
+from umf.eval.reconstruction import reconstruct
 from umf.pipeline import UMFPipeline, delivered_joints
 from umf.representation import CONTACT, features_to_joints
 
@@ -31,22 +32,19 @@ RECONSTRUCTED = 64  # real clips per label
 def reconstructions(pipe: UMFPipeline, corpus: Corpus, label: str, delivered: bool) -> list:
     """The label's real clips (at most RECONSTRUCTED, evenly spaced over the corpus order,
     which groups styles; each whole up to 300 frames, as the real range takes them) through
-    the VAE: joints (T, 22, 3) each, raw or as the pipeline delivers them."""
+    the VAE as the pipeline decodes (``umf.eval.reconstruction.reconstruct``): joints
+    (T, 22, 3) each, raw or as the pipeline delivers them."""
     clips = MS.real_clips_by_label(corpus, labels=[label]).get(label, [])
     if len(clips) > RECONSTRUCTED:
         clips = [
             clips[i] for i in np.linspace(0, len(clips) - 1, RECONSTRUCTED).round().astype(int)
         ]
+    feats = [corpus.clip_features(clip)[0][:300] for clip in clips]
     out = []
-    for clip in clips:
-        f = torch.as_tensor(corpus.clip_features(clip)[0][:300], dtype=torch.float32)
-        x = pipe.normalizer.normalize(f[None])
-        with torch.no_grad():
-            mu = pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
-            decoded = pipe.decode(mu, len(f))[0]
-        joints = features_to_joints(decoded).numpy()
+    for decoded in reconstruct(pipe.vae, pipe.normalizer, feats):
+        joints = features_to_joints(torch.as_tensor(decoded)).numpy()
         if delivered:
-            joints = delivered_joints(joints[None], decoded[None, :, CONTACT].numpy())[0]
+            joints = delivered_joints(joints[None], decoded[None, :, CONTACT])[0]
         out.append(joints)
     return out
 

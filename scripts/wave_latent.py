@@ -68,6 +68,7 @@ import numpy as np
 import torch
 
 from umf.eval import motion_stats as MS
+from umf.flows.pyramid import split_detail
 
 LATENT_LABELS = ("wave-right-hand", "walk", "raise-up-both-hands")
 
@@ -105,7 +106,13 @@ def time_mean(z: torch.Tensor) -> torch.Tensor:
 
 def _encode(pipe, feats: list[np.ndarray]) -> torch.Tensor:
     """Posterior means (B, p, r) of real features (B, T, 262), as the pipeline encodes."""
-    x = pipe.normalizer.normalize(torch.as_tensor(np.stack(feats), dtype=torch.float32))
+    return _encode_normalized(
+        pipe, pipe.normalizer.normalize(torch.as_tensor(np.stack(feats), dtype=torch.float32))
+    )
+
+
+def _encode_normalized(pipe, x: torch.Tensor) -> torch.Tensor:
+    """Posterior means (B, p, r) of normalised features (B, T, 262), every frame present."""
     with torch.no_grad():
         return pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
 
@@ -182,32 +189,18 @@ def decode(args: argparse.Namespace) -> None:
 def refine(args: argparse.Namespace) -> None:
     from umf.data.corpus import Corpus
     from umf.flows import integrate
-    from umf.flows.pyramid import down, up
-    from umf.models.pflow import _stage_field, encode_uncond, stage_scales
+    from umf.models.pflow import _stage_field, stage_scales
     from umf.pipeline import UMFPipeline
-    from umf.text import respell_prompt
 
     corpus = Corpus.load(args.corpus)
     pipe = UMFPipeline.from_pretrained(args.model)
-    pflow, cfg = pipe.pflow, pipe.config
-    clips = MS.real_clips_by_label(corpus, ("val", "test"), ["wave-right-hand"])
-    feats = [f for c in clips["wave-right-hand"]
-             if len(f := corpus.clip_features(c)[0][:160]) == 160]  # fmt: skip
-    mu = _encode(pipe, feats)
-    z1 = pflow.latent_norm.normalize(mu)
+    pflow = pipe.pflow
+    z1 = pflow.latent_norm.normalize(_real_latents(pipe, corpus, "wave-right-hand"))
     b = len(z1)
-    prompt = respell_prompt(MS.LABELS["wave-right-hand"][0], cfg.text.respell)
-    net = pflow.net
-    cond = {"text": net.encode_text(pipe.text_encoder.encode([prompt] * b)),
-            "dataset": torch.zeros(b, dtype=torch.long)}  # fmt: skip
-    uncond = {**cond, "text": encode_uncond(net, pipe.text_encoder.encode([""]), b)}
-    field = _stage_field(net, stage_scales(pflow.cfg), cond, uncond)
-    window = pflow.pyramid.window(1)  # the finest stage
+    cond, uncond = _conditions(pipe, MS.LABELS["wave-right-hand"][0], b)
+    field = _stage_field(pflow.net, stage_scales(pflow.cfg), cond, uncond)
+    window, start = _fine_stage_start(pflow, z1)
     stage = torch.ones(b, dtype=torch.long)
-    layout = pflow.pyramid.layout
-    gen = torch.Generator().manual_seed(0)
-    eps = torch.randn(z1.shape, generator=gen)
-    start = window.start * up(down(z1, layout), layout) + (1 - window.start) * eps
 
     def local(x: torch.Tensor, t_local: torch.Tensor) -> torch.Tensor:
         return field(x, window.global_time(t_local), stage=stage)
@@ -232,7 +225,7 @@ def detail_retention(estimate: torch.Tensor, truth: torch.Tensor) -> tuple[float
     """(energy, projection) of an estimate's fine detail relative to the truth's: the
     estimate's detail energy / the truth's, and <estimate's detail, truth's detail> / the
     truth's energy. Detail: each token less the mean of its token pair (1-D pyramid)."""
-    d_est, d_true = estimate - pair_mean(estimate), truth - pair_mean(truth)
+    d_est, d_true = split_detail(estimate, "1d")[1], split_detail(truth, "1d")[1]
     energy = float(d_true.pow(2).sum())
     return float(d_est.pow(2).sum()) / energy, float((d_est * d_true).sum()) / energy
 
@@ -259,12 +252,24 @@ def _crop_latents(pipe, corpus, label: str, clips: int, crops: int) -> torch.Ten
         for d, i in items[:clips]:
             d.set_epoch(epoch)
             feats.append(d[i]["features"])
-    x = torch.stack(feats).float()
-    with torch.no_grad():
-        return pipe.vae.encode(x, torch.ones(x.shape[:2], dtype=torch.bool))[0]
+    return _encode_normalized(pipe, torch.stack(feats).float())
+
+
+def _fine_stage_start(pflow, z1: torch.Tensor):
+    """(window, start) of the finest pyramid stage for standardised latents z1 (B, p, r):
+    where the sampler hands over from the coarse stage, their block means plus noise
+    (seed 0)."""
+    from umf.flows.pyramid import split_detail
+
+    window = pflow.pyramid.window(1)
+    eps = torch.randn(z1.shape, generator=torch.Generator().manual_seed(0))
+    coarse, _ = split_detail(z1, pflow.pyramid.layout)
+    return window, window.start * coarse + (1 - window.start) * eps
 
 
 def _conditions(pipe, prompt: str, b: int) -> tuple[dict, dict]:
+    """The fine field's conditional (prompt, single-person dataset) and unconditional
+    inputs for a batch of ``b``."""
     from umf.models.pflow import encode_uncond
     from umf.text import respell_prompt
 
@@ -277,7 +282,6 @@ def _conditions(pipe, prompt: str, b: int) -> tuple[dict, dict]:
 
 def detail(args: argparse.Namespace) -> None:
     from umf.data.corpus import Corpus
-    from umf.flows.pyramid import down, up
     from umf.models.pflow import _stage_field
     from umf.pipeline import UMFPipeline
 
@@ -288,6 +292,10 @@ def detail(args: argparse.Namespace) -> None:
         raise SystemExit("detail needs a P-Flow with a 1-D pyramid of at least two stages")
     times = (0.0, 0.25, 0.5, 0.75, 0.9)
     window = pflow.pyramid.window(1)  # the finest stage
+    gain = getattr(pflow.latent_norm, "detail_gain", None)  # pflow.detail_norm
+    if gain is not None:
+        print(f"pflow.detail_norm: detail gains {float(gain.min()):.2f}-{float(gain.max()):.2f} "
+              "(energies below are in the flow's units, the detail amplified)\n")  # fmt: skip
     print("| label | real detail energy | " + " | ".join(
         f"t' {t:g} (t {window.global_time(t):.2f})" for t in times) + " |")  # fmt: skip
     print("|---|---:|" + "---:|" * len(times))
@@ -297,8 +305,7 @@ def detail(args: argparse.Namespace) -> None:
         cond, uncond = _conditions(pipe, MS.LABELS[label][0], b)
         field = _stage_field(pflow.net, (None,) * pflow.pyramid.num_stages, cond, uncond)
         stage = torch.ones(b, dtype=torch.long)
-        eps = torch.randn(z1.shape, generator=torch.Generator().manual_seed(0))
-        start = window.start * up(down(z1, "1d"), "1d") + (1 - window.start) * eps
+        _, start = _fine_stage_start(pflow, z1)
         cells = []
         for t in times:
             x = t * z1 + (1 - t) * start
@@ -306,7 +313,7 @@ def detail(args: argparse.Namespace) -> None:
                 v = field(x, torch.full((b,), float(window.global_time(t))), stage=stage)
             energy, proj = detail_retention(x + (1 - t) * v, z1)
             cells.append(f"{energy:.2f} / {proj:.2f}")
-        own = float((z1 - pair_mean(z1)).pow(2).mean())
+        own = float(split_detail(z1, "1d")[1].pow(2).mean())
         print(f"| {label} | {own:.3f} | " + " | ".join(cells) + " |", flush=True)
 
 
@@ -330,16 +337,16 @@ def perturb(args: argparse.Namespace) -> None:
     print("| noise added (std, standardised units) | " + " | ".join(f"{s:g}" for s in sigmas)
           + " |")  # fmt: skip
     print("|---|" + "---:|" * len(sigmas))
-    fine = (eps - pair_mean(eps)) * 2**0.5  # unit variance per element, like eps
-    for name, noise in (("everywhere", eps), ("fine detail only", fine),
-                        ("pair means only", pair_mean(eps) * 2**0.5)):  # fmt: skip
+    coarse_eps, fine_eps = split_detail(eps, "1d")  # each: variance 1/2 per element
+    for name, noise in (("everywhere", eps), ("fine detail only", fine_eps * 2**0.5),
+                        ("pair means only", coarse_eps * 2**0.5)):  # fmt: skip
         cells = [scored(z1 + s * noise) for s in sigmas]
         print(f"| {name} | " + " | ".join(cells) + " |", flush=True)
     print()
     print("| fine detail kept | 1 | 0.75 | 0.5 | 0.25 |")
     print("|---|---:|---:|---:|---:|")
-    coarse = pair_mean(z1)
-    cells = [scored(coarse + k * (z1 - coarse)) for k in (1.0, 0.75, 0.5, 0.25)]
+    coarse, fine = split_detail(z1, "1d")
+    cells = [scored(coarse + k * fine) for k in (1.0, 0.75, 0.5, 0.25)]
     print("| decoded | " + " | ".join(cells) + " |", flush=True)
 
 

@@ -107,6 +107,13 @@ def up(x: Tensor, layout: Layout, levels: int = 1) -> Tensor:
     return up_1d(x, levels) if layout == "1d" else up_2d(x, levels)
 
 
+def split_detail(x: Tensor, layout: Layout) -> tuple[Tensor, Tensor]:
+    """(coarse, detail) of fine-resolution tokens: each token's block mean, Up(Down(x)), and
+    the token less it (the part only a finer stage adds; the blocks' means of it are 0)."""
+    coarse = up(down(x, layout), layout)
+    return coarse, x - coarse
+
+
 def block_size(layout: Layout) -> int:
     """Fine tokens per coarse token: 2 (1-D pairs) or 4 (2x2 grid cells)."""
     if layout not in ("1d", "2d"):
@@ -185,9 +192,9 @@ def block_noise_from_white(z: Tensor, layout: Layout, g: float) -> Tensor:
     """
     b = block_size(layout)
     check_correlation(g, b)
-    m = up(down(z, layout), layout)
+    m, detail = split_detail(z, layout)
     keep = math.sqrt(max(0.0, 1.0 - (b - 1) * g))
-    return math.sqrt(1.0 + g) * (z - m) + keep * m
+    return math.sqrt(1.0 + g) * detail + keep * m
 
 
 def block_noise(

@@ -20,7 +20,7 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from umf.flows.pyramid import Layout, down, up
+from umf.flows.pyramid import Layout, split_detail
 
 # Largest detail gain: a channel whose tokens hardly differ within a block holds no fine
 # detail worth the flow's effort, and a huge gain would only magnify rounding and encoder
@@ -67,24 +67,19 @@ class LatentNormalizer(nn.Module):
         detail layout."""
         if self.detail_layout is None:
             return
-        _, detail = self._split((z.to(self.mean) - self.mean) / self.std)
+        _, detail = split_detail((z.to(self.mean) - self.mean) / self.std, self.detail_layout)
         rms = detail.pow(2).mean(dim=(0, 1)).sqrt()
         self.detail_gain.copy_((1.0 / rms.clamp_min(1e-12)).clamp_max(MAX_DETAIL_GAIN))
-
-    def _split(self, z: Tensor) -> tuple[Tensor, Tensor]:
-        """(coarse, detail): each token's block mean, and the token less it."""
-        coarse = up(down(z, self.detail_layout), self.detail_layout)
-        return coarse, z - coarse
 
     def normalize(self, z: Tensor) -> Tensor:
         z = (z - self.mean) / self.std
         if self.detail_layout is None:
             return z
-        coarse, detail = self._split(z)
+        coarse, detail = split_detail(z, self.detail_layout)
         return coarse + detail * self.detail_gain
 
     def denormalize(self, z: Tensor) -> Tensor:
         if self.detail_layout is not None:
-            coarse, detail = self._split(z)
+            coarse, detail = split_detail(z, self.detail_layout)
             z = coarse + detail / self.detail_gain
         return z * self.std + self.mean
