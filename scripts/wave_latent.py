@@ -6,7 +6,9 @@
     python scripts/wave_latent.py finetune MODEL_DIR --out DIR [--steps 400] [--label ...]
     python scripts/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
-    python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--corpus ...]
+    python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
+        [--fresh WIDTH,LAYERS] [--detail-norm] [--corpus ...]
+    python scripts/wave_latent.py churn MODEL_DIR
 
 ``latents``: for waves, walks and raised hands, how much the latent changes along time,
 for latents of real training clips (posterior means of their first 4 s) and for latents
@@ -50,10 +52,25 @@ the pair means only), and with their fine detail shrunk, decoded: wrist speed an
 with ``--crops K`` K random 160-frame crops of each, canonical at the crop's start as in
 training, so that the swing's phase is random), with the label's prompt, and
 every 200 steps 16 people are sampled with that prompt: the time variation of their
-latents (standardised, the tokens of 4 s) and the decoded wrist speed and swings, against
-the same numbers for the real clips. ``--fresh WIDTH,LAYERS`` trains a new, untrained
-P-Flow of that width and depth (feed-forward twice the width; the model's latent
-statistics) instead of the model's own. Nothing is written.
+latents (standardised, the tokens of 4 s), how near each is to a real latent (the median
+squared distance per element to its nearest real latent, and how many distinct real
+latents are nearest: a model that memorised them gives distances far below the real
+latents' own from each other) and the decoded wrist speed and swings, against the same
+numbers for the real clips. At the end, each person of the last sample beside the real
+latent it came nearest to, both decoded (160 frames): the swings of a near-copy should be
+that real latent's; the median over people also depends on which real latents the model
+picks, and real waves' first 160 frames often have no swing at all. ``--fresh
+WIDTH,LAYERS`` trains a new, untrained P-Flow of that width and depth (feed-forward twice
+the width; the model's latent statistics) instead of the model's own; ``--detail-norm``
+trains with ``pflow.detail_norm``, its gains fitted on the training latents (the model's
+weights, or a fresh P-Flow's with ``--fresh``). Distances are in the model's own
+standardised units either way. Nothing is written.
+
+``churn``: does stochastic sampling bring the swing back? The P-Flow sampled with
+Euler-Maruyama steps that add a Langevin term to each stage (``churn_sample``: it leaves
+the path's marginals as they are, so it changes nothing for an exact field, and pulls a
+too-smooth learnt field's samples back towards the statistics its noise estimate implies),
+for the wave's and the walk's prompts, at several churn levels and step counts.
 """
 
 from __future__ import annotations
@@ -89,6 +106,15 @@ def time_variation(z: torch.Tensor) -> tuple[float, float]:
     step = (z[:, 1:] - z[:, :-1]).pow(2).mean()
     spread = (z - z.mean(1, keepdim=True)).pow(2).mean()
     return float(step), float(spread)
+
+
+def nearest(z: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
+    """For latents z (B, p, r): the squared distance per element to the nearest of ``ref``
+    (N, p, r), and its index. A model that memorised ``ref`` gives distances far below those
+    between the ``ref`` latents themselves."""
+    d = torch.cdist(z.flatten(1).double(), ref.flatten(1).double()).pow(2) / ref[0].numel()
+    dist, which = d.min(1)
+    return dist.float(), which
 
 
 def pair_mean(z: torch.Tensor) -> torch.Tensor:
@@ -221,6 +247,87 @@ def refine(args: argparse.Namespace) -> None:
               flush=True)  # fmt: skip
 
 
+def stage_noise_estimate(x: torch.Tensor, v: torch.Tensor, t_local: float, window,
+                         layout: str) -> tuple[torch.Tensor, float]:  # fmt: skip
+    """(the noise eps the state x holds, as the velocity v implies; the noise's scale S) on a
+    pyramid stage's path at local time t'.
+
+    On the stage [s, e], x = A X + S eps and the target v = B X + C eps, with S = t'(1-e) +
+    (1-t')(1-s) and C = s - e for every component, and A, B = t'e + (1-t')s, e - s for the
+    block means, t'e, e for the detail (the stage's start holds the block means of X at s).
+    Each pair solves for eps = (A v - B x) / (A C - B S). The score is then -eps / S.
+    """
+    s, e = window.start, window.end
+    scale = t_local * (1 - e) + (1 - t_local) * (1 - s)
+    parts = [(x, v, t_local * e + (1 - t_local) * s, e - s)]  # the whole state when s = 0
+    if s > 0:
+        (xm, xd), (vm, vd) = split_detail(x, layout), split_detail(v, layout)
+        parts = [(xm, vm, t_local * e + (1 - t_local) * s, e - s), (xd, vd, t_local * e, e)]
+    c = s - e
+    return sum((a * vv - b * xx) / (a * c - b * scale) for xx, vv, a, b in parts), scale
+
+
+def churn_sample(pflow, cond: dict, uncond: dict, b: int, churn: tuple[float, ...],
+                 steps: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:  # fmt: skip
+    """Standardised latents (b, p, r) from the P-Flow's pyramid with Euler-Maruyama steps:
+    per stage, dx = (v - churn/2 eps_hat) dt' + sqrt(churn S dt') dW, a Langevin term
+    (score -eps_hat / S, diffusion churn * S) that leaves every marginal of the path as it
+    is, so an exact field samples the same distribution with any churn; a learnt field
+    that is too smooth gets its noise-level statistics pulled back. The last step of each
+    stage is a plain Euler step. churn 0 is the bundled sampler."""
+    from umf.flows.pyramid import initial_noise, jump, jump_alpha
+    from umf.models.pflow import _stage_field, stage_scales
+
+    field = _stage_field(pflow.net, stage_scales(pflow.cfg), cond, uncond)
+    cfg = pflow.pyramid
+    x = initial_noise(cfg, b, pflow.latent_dim, generator=generator)
+    windows = cfg.windows
+    for i, (w, n, c) in enumerate(zip(windows, steps, churn, strict=True)):
+        stage = torch.full((b,), w.stage, dtype=torch.long)
+        for k in range(n):
+            t_local = k / n
+            v = field(x, torch.full((b,), float(w.global_time(t_local))), stage=stage)
+            if c > 0 and k < n - 1:
+                eps, scale = stage_noise_estimate(x, v, t_local, w, cfg.layout)
+                noise = torch.randn(x.shape, generator=generator)
+                x = x + (v - 0.5 * c * eps) / n + (c * scale / n) ** 0.5 * noise
+            else:
+                x = x + v / n
+        if i + 1 < len(windows):
+            s_next = windows[i + 1].start
+            x = jump(x, s=s_next, e=w.end, alpha=jump_alpha(s_next, cfg.correlation),
+                     layout=cfg.layout, g=cfg.correlation, generator=generator)  # fmt: skip
+    return x
+
+
+def churn(args: argparse.Namespace) -> None:
+    from umf.pipeline import UMFPipeline
+
+    pipe = UMFPipeline.from_pretrained(args.model)
+    pflow = pipe.pflow
+    settings = (((0.0, 0.0), (45, 5)), ((0.0, 1.0), (45, 20)), ((0.0, 2.0), (45, 20)),
+                ((1.0, 1.0), (45, 20)), ((0.0, 4.0), (45, 20)), ((0.0, 8.0), (45, 40)),
+                ((0.0, 16.0), (45, 80)), ((4.0, 4.0), (90, 40)))  # fmt: skip
+    print("32 people per prompt, 160 frames, seed 0; churn and Euler-Maruyama steps per stage "
+          "(coarse / fine); medians, and the share swinging at least once a second")  # fmt: skip
+    print("| churn | steps | label | statistics (median) | swinging >= 1/s |")
+    print("|---|---|---|---|---:|")
+    for label in ("wave-right-hand", "walk"):
+        prompt, names = MS.LABELS[label]
+        cond, uncond = _conditions(pipe, prompt, 32)
+        for c, steps in settings:
+            gen = torch.Generator().manual_seed(0)
+            with torch.no_grad():
+                z = churn_sample(pflow, cond, uncond, 32, c, steps, gen)
+            per = np.array([MS.median_statistics([j], list(names)) for j in
+                            _joints(pipe, pflow.latent_norm.denormalize(z), 160)])  # fmt: skip
+            med = ", ".join(f"{n} {m:.2f}" for n, m in zip(names, np.median(per, 0), strict=True))
+            share = (f"{np.mean(per[:, list(names).index('right_wrist_swings')] >= 1):.2f}"
+                     if "right_wrist_swings" in names else "")  # fmt: skip
+            print(f"| {c[0]:g} / {c[1]:g} | {steps[0]} / {steps[1]} | {label} | {med} | {share} |",
+                  flush=True)  # fmt: skip
+
+
 def detail_retention(estimate: torch.Tensor, truth: torch.Tensor) -> tuple[float, float]:
     """(energy, projection) of an estimate's fine detail relative to the truth's: the
     estimate's detail energy / the truth's, and <estimate's detail, truth's detail> / the
@@ -351,8 +458,11 @@ def perturb(args: argparse.Namespace) -> None:
 
 
 def overfit(args: argparse.Namespace) -> None:
+    import dataclasses
+
     from umf.data.corpus import Corpus
     from umf.models.denoiser import expand_text
+    from umf.models.pflow import PFlow
     from umf.pipeline import UMFPipeline
     from umf.text import respell_prompt
 
@@ -360,45 +470,57 @@ def overfit(args: argparse.Namespace) -> None:
     corpus = Corpus.load(args.corpus)
     pipe = UMFPipeline.from_pretrained(args.model)
     pflow = pipe.pflow.float()
-    if args.fresh:  # a new, untrained P-Flow of another width and depth (the same latents)
-        import dataclasses
-
-        from umf.models.pflow import PFlow
-
-        width, layers = (int(v) for v in args.fresh.split(","))
-        den = dataclasses.replace(pflow.cfg.denoiser, d_model=width, num_layers=layers,
-                                  ff_dim=2 * width)  # fmt: skip
-        cfg = dataclasses.replace(pflow.cfg, denoiser=den)
-        fresh = PFlow(cfg, pflow.num_tokens, pflow.latent_dim, pipe.text_encoder.dim)
-        fresh.latent_norm.load_state_dict(pflow.latent_norm.state_dict())
-        pflow = fresh
-        size = sum(p.numel() for p in pflow.parameters()) / 1e6
-        print(f"a fresh P-Flow, {width} wide, {layers} layers: {size:.2f} M parameters")
+    units = pflow.latent_norm  # distances in the model's own standardised units, either way
     if args.crops:
         mu = _crop_latents(pipe, corpus, "wave-right-hand", args.clips, args.crops)
     else:
         mu = _real_latents(pipe, corpus, "wave-right-hand", args.clips)
+    if args.fresh or args.detail_norm:  # a new P-Flow: another size, or the detail normaliser
+        cfg = dataclasses.replace(pflow.cfg, detail_norm=args.detail_norm)
+        if args.fresh:
+            width, layers = (int(v) for v in args.fresh.split(","))
+            den = dataclasses.replace(cfg.denoiser, d_model=width, num_layers=layers,
+                                      ff_dim=2 * width)  # fmt: skip
+            cfg = dataclasses.replace(cfg, denoiser=den)
+        new = PFlow(cfg, pflow.num_tokens, pflow.latent_dim, pipe.text_encoder.dim)
+        if not args.fresh:  # the model's weights; only the normaliser's gains are new
+            new.load_state_dict(pflow.state_dict(), strict=False)
+        new.latent_norm.load_state_dict(units.state_dict(), strict=False)
+        new.latent_norm.fit_detail(mu)  # no-op without detail_norm
+        pflow = new
+        size = sum(p.numel() for p in pflow.parameters()) / 1e6
+        what = f"a fresh P-Flow, {args.fresh.replace(',', ' wide, ')} layers" if args.fresh else (
+            "the model's P-Flow")  # fmt: skip
+        gains = ", with pflow.detail_norm (gains fitted on these latents)"
+        print(f"{what}: {size:.2f} M parameters{gains if args.detail_norm else ''}")
+    ref = units.normalize(mu)
+    apart = torch.cdist(ref.flatten(1), ref.flatten(1)).pow(2) / ref[0].numel()
+    apart = apart[~torch.eye(len(ref), dtype=torch.bool)]  # between two real latents
     prompt = respell_prompt(MS.LABELS["wave-right-hand"][0], pipe.config.text.respell)
     text, empty = pipe.text_encoder.encode([prompt]), pipe.text_encoder.encode([""])
     stats = ["right_wrist_energy", "right_wrist_swings"]
     k = round(120 / pipe.config.vae.token_span)  # the tokens of 4 s
 
-    def row(name: str, z: torch.Tensor) -> None:
-        step, spread = time_variation(pflow.latent_norm.normalize(z)[:, :k])
+    def row(name: str, z: torch.Tensor, near: str = "") -> None:
+        step, spread = time_variation(units.normalize(z)[:, :k])
         speed, swings = MS.median_statistics(_joints(pipe, z, 120), stats)
-        print(f"| {name} | {step:.3f} | {spread:.3f} | {speed:.2f} | {swings:.2f} |", flush=True)
+        print(f"| {name} | {step:.3f} | {spread:.3f} | {near} | {speed:.2f} | {swings:.2f} |",
+              flush=True)  # fmt: skip
 
-    def sampled(name: str) -> None:
+    def sampled(name: str) -> torch.Tensor:
         z, _ = pflow.sample(text, empty, num_samples=16, dataset=0,  # single person, as trained
                             generator=torch.Generator().manual_seed(1))  # fmt: skip
-        row(name, z)
+        dist, which = nearest(units.normalize(z), ref)
+        row(name, z, f"{float(dist.median()):.3f} ({len(set(which.tolist()))})")
+        return z
 
     what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"
     print(f"P-Flow trained on the latents of {what} {args.clips} real val + test waves "
           f"alone ({len(mu)} latents), prompt {prompt!r}; 4 s, 16 people, seed 1")  # fmt: skip
-    print("| latents | neighbour step² | spread² | right-wrist speed (m/s) | swings/s |")
-    print("|---|---:|---:|---:|---:|")
-    row(f"the {len(mu)} real latents", mu)
+    print("| latents | neighbour step² | spread² | nearest real: dist² (distinct) "
+          "| right-wrist speed (m/s) | swings/s |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|")
+    row(f"the {len(mu)} real latents", mu, f"two of them: {float(apart.median()):.3f}")
     sampled("generated, before")
     opt = torch.optim.AdamW(pflow.parameters(), lr=2e-4)
     batch = 64
@@ -406,6 +528,7 @@ def overfit(args: argparse.Namespace) -> None:
     dataset = torch.zeros(batch, dtype=torch.long)
     gen = torch.Generator().manual_seed(0)
     t0 = time.time()
+    z = mu
     for step in range(1, args.steps + 1):
         pflow.train()
         idx = torch.randint(0, len(mu), (batch,), generator=gen)
@@ -414,7 +537,22 @@ def overfit(args: argparse.Namespace) -> None:
         loss.backward()
         opt.step()
         if step % 200 == 0:
-            sampled(f"generated, after {step} steps ({time.time() - t0:.0f} s)")
+            z = sampled(f"generated, after {step} steps ({time.time() - t0:.0f} s)")
+    # each person of the last sample beside the real latent it came nearest to, decoded
+    dist, which = nearest(units.normalize(z), ref)
+    gen_j, real_j = _joints(pipe, z, 160), _joints(pipe, mu, 160)
+    print("\nThe last sample, person by person, against its nearest real latent (160 frames):")
+    print("| person | nearest real | dist² | generated: m/s, swings/s | that real: m/s, swings/s |")
+    print("|---:|---:|---:|---|---|")
+    for i in range(len(z)):
+        g = MS.median_statistics([gen_j[i]], stats)
+        r = MS.median_statistics([real_j[int(which[i])]], stats)
+        print(f"| {i} | {int(which[i])} | {float(dist[i]):.3f} | {g[0]:.2f}, {g[1]:.2f} "
+              f"| {r[0]:.2f}, {r[1]:.2f} |")  # fmt: skip
+    swings = np.array([MS.median_statistics([j], stats)[1] for j in real_j])
+    print(f"\nThe {len(mu)} real latents: swings/s quartiles "
+          f"{' / '.join(f'{q:.2f}' for q in np.percentile(swings, [25, 50, 75]))}, "
+          f"{int((swings == 0).sum())} with none")  # fmt: skip
 
 
 def finetune(args: argparse.Namespace) -> None:
@@ -498,19 +636,24 @@ def main() -> None:
     of.add_argument("--steps", type=int, default=600)
     of.add_argument("--fresh", default="",
                     help="WIDTH,LAYERS: train a new P-Flow of that size instead")  # fmt: skip
+    of.add_argument("--detail-norm", action="store_true",
+                    help="train with pflow.detail_norm (gains fitted on the latents)")  # fmt: skip
     of.add_argument(
         "--crops",
         type=int,
         default=0,
         help="random crops per clip (0: each clip's first 160 frames)",
     )
-    for p in (la, de, rf, ft, dt, pt, of):
+    ch = sub.add_parser("churn")
+    ch.add_argument("model")
+    for p in (la, de, rf, ft, dt, pt, of, ch):
         p.add_argument("--corpus", default="out/corpus")
         p.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     commands = {"latents": latents, "decode": decode, "refine": refine, "finetune": finetune,
-                "detail": detail, "perturb": perturb, "overfit": overfit}  # fmt: skip
+                "detail": detail, "perturb": perturb, "overfit": overfit,
+                "churn": churn}  # fmt: skip
     commands[args.cmd](args)
 
 

@@ -36,3 +36,38 @@ def test_detail_retention_compares_fine_detail_only():
     assert wl.detail_retention(half + 3.0, truth) == pytest.approx((0.25, 0.5))
     flipped = coarse - (truth - coarse)  # as much detail, the wrong way round
     assert wl.detail_retention(flipped, truth) == pytest.approx((1.0, -1.0))
+
+
+def test_nearest_finds_the_real_latent_a_sample_copies():
+    wl = load_script("wave_latent")
+    g = torch.Generator().manual_seed(0)
+    ref = torch.randn(5, 8, 3, generator=g)
+    near = ref[[3, 0, 3]] + 0.01 * torch.randn(3, 8, 3, generator=g)  # near-copies
+    dist, which = wl.nearest(near, ref)
+    assert which.tolist() == [3, 0, 3]
+    assert float(dist.max()) < 1e-3  # per element: about 0.01² each
+    far = torch.zeros(1, 8, 3)  # the origin: nearest is the smallest latent, at its norm
+    dist, which = wl.nearest(far, ref)
+    norms = ref.flatten(1).pow(2).mean(1)
+    assert int(which) == int(norms.argmin()) and float(dist) == pytest.approx(float(norms.min()))
+
+
+@pytest.mark.parametrize("layout", ["1d", "2d"])
+def test_stage_noise_estimate_recovers_the_noise_on_every_stage(layout):
+    """On each stage's path, with the exact target as the velocity, the estimate is the
+    noise the state was built from (a wrong A, B, C or S for either component fails)."""
+    from umf.flows.pyramid import PyramidConfig, down, stage_endpoints
+
+    wl = load_script("wave_latent")
+    cfg = PyramidConfig(layout=layout, num_stages=3, num_tokens=16)
+    g = torch.Generator().manual_seed(0)
+    z1 = torch.randn(4, 16, 5, generator=g)
+    for w in cfg.windows:
+        x_level = down(z1, layout, w.level)
+        eps = torch.randn(x_level.shape, generator=g)
+        start, end = stage_endpoints(x_level, eps, w, layout)
+        for t in (0.0, 0.3, 0.9):
+            x = t * end + (1 - t) * start
+            est, scale = wl.stage_noise_estimate(x, end - start, t, w, layout)
+            assert torch.allclose(est, eps, atol=1e-5), (w, t)
+            assert scale == pytest.approx(t * (1 - w.end) + (1 - t) * (1 - w.start))
