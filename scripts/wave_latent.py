@@ -9,6 +9,7 @@
     python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
         [--fresh WIDTH,LAYERS] [--detail-norm] [--corpus ...]
     python scripts/wave_latent.py churn MODEL_DIR
+    python scripts/wave_latent.py nyquist MODEL_DIR
 
 ``latents``: for waves, walks and raised hands, how much the latent changes along time,
 for latents of real training clips (posterior means of their first 4 s) and for latents
@@ -71,6 +72,11 @@ Euler-Maruyama steps that add a Langevin term to each stage (``churn_sample``: i
 the path's marginals as they are, so it changes nothing for an exact field, and pulls a
 too-smooth learnt field's samples back towards the statistics its noise estimate implies),
 for the wave's and the walk's prompts, at several churn levels and step counts.
+
+``nyquist``: does the VAE keep a swing faster than its tokens can follow? Every real wave
+(first 160 frames) encoded and decoded, grouped by the real swing's frequency (FFT peak
+of the wrist's sideways trace) against half the latent's token rate: swings per second
+and the hand's side-to-side range, real and reconstructed.
 """
 
 from __future__ import annotations
@@ -326,6 +332,43 @@ def churn(args: argparse.Namespace) -> None:
                      if "right_wrist_swings" in names else "")  # fmt: skip
             print(f"| {c[0]:g} / {c[1]:g} | {steps[0]} / {steps[1]} | {label} | {med} | {share} |",
                   flush=True)  # fmt: skip
+
+
+def nyquist(args: argparse.Namespace) -> None:
+    from umf.data.corpus import Corpus
+    from umf.pipeline import UMFPipeline
+
+    corpus = Corpus.load(args.corpus)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    span = pipe.config.vae.token_span
+    limit = 30.0 / span / 2  # half the latent's token rate (30 fps clips)
+    clips = MS.real_clips_by_label(corpus, ("train", "val", "test"), ["wave-right-hand"])
+    clips = [c for c in clips["wave-right-hand"] if c.num_frames > 161]
+    feats = [corpus.clip_features(c)[0][:160] for c in clips]
+    rec: list[np.ndarray] = []
+    for i in range(0, len(feats), 32):
+        rec += _joints(pipe, _encode(pipe, feats[i : i + 32]), 160)
+    rows = []
+    for clip, out in zip(clips, rec, strict=True):
+        real = clip.joints[0][:161]
+        rows.append((swing_frequency(MS.sideways(real)),
+                     MS.motion_statistics(real)["right_wrist_swings"],
+                     MS.motion_statistics(out)["right_wrist_swings"],
+                     np.ptp(MS.sideways(real)), np.ptp(MS.sideways(out))))  # fmt: skip
+    table = np.array(rows)
+    print(f"{len(table)} real waves of every split (their first 160 frames) encoded and "
+          f"decoded; tokens of {span:g} frames: the latent's Nyquist frequency is "
+          f"{limit:g} Hz")  # fmt: skip
+    print("| real swing frequency | clips | swings/s: real | reconstructed | kept "
+          "| side-to-side range (cm): real | reconstructed |")  # fmt: skip
+    print("|---|---:|---:|---:|---:|---:|---:|")
+    for lo, hi in ((0.0, limit / 2), (limit / 2, limit), (limit, np.inf)):
+        sel = table[(table[:, 0] >= lo) & (table[:, 0] < hi)]
+        if len(sel):
+            real, out, r_range, o_range = np.median(sel[:, 1:], axis=0)
+            print(f"| {lo:g}-{hi:g} Hz | {len(sel)} | {real:.2f} | {out:.2f} | "
+                  f"{out / real if real else float('nan'):.2f} | {100 * r_range:.0f} "
+                  f"| {100 * o_range:.0f} |")  # fmt: skip
 
 
 def detail_retention(estimate: torch.Tensor, truth: torch.Tensor) -> tuple[float, float]:
@@ -646,14 +689,16 @@ def main() -> None:
     )
     ch = sub.add_parser("churn")
     ch.add_argument("model")
-    for p in (la, de, rf, ft, dt, pt, of, ch):
+    ny = sub.add_parser("nyquist")
+    ny.add_argument("model")
+    for p in (la, de, rf, ft, dt, pt, of, ch, ny):
         p.add_argument("--corpus", default="out/corpus")
         p.add_argument("--threads", type=int, default=2)
     args = ap.parse_args()
     torch.set_num_threads(args.threads)
     commands = {"latents": latents, "decode": decode, "refine": refine, "finetune": finetune,
                 "detail": detail, "perturb": perturb, "overfit": overfit,
-                "churn": churn}  # fmt: skip
+                "churn": churn, "nyquist": nyquist}  # fmt: skip
     commands[args.cmd](args)
 
 
