@@ -273,20 +273,19 @@ def stage_noise_estimate(x: torch.Tensor, v: torch.Tensor, t_local: float, windo
     return sum((a * vv - b * xx) / (a * c - b * scale) for xx, vv, a, b in parts), scale
 
 
-def churn_sample(pflow, cond: dict, uncond: dict, b: int, churn: tuple[float, ...],
+def churn_sample(field, cfg, noise: torch.Tensor, churn: tuple[float, ...],
                  steps: tuple[int, ...], generator: torch.Generator) -> torch.Tensor:  # fmt: skip
-    """Standardised latents (b, p, r) from the P-Flow's pyramid with Euler-Maruyama steps:
-    per stage, dx = (v - churn/2 eps_hat) dt' + sqrt(churn S dt') dW, a Langevin term
+    """Standardised latents from a pyramid (``cfg``) with Euler-Maruyama steps, from the
+    coarsest stage's ``noise``; ``field(x, t, stage=...)`` as ``sample_pyramid`` calls it.
+    Per stage, dx = (v - churn/2 eps_hat) dt' + sqrt(churn S dt') dW: a Langevin term
     (score -eps_hat / S, diffusion churn * S) that leaves every marginal of the path as it
-    is, so an exact field samples the same distribution with any churn; a learnt field
-    that is too smooth gets its noise-level statistics pulled back. The last step of each
-    stage is a plain Euler step. churn 0 is the bundled sampler."""
-    from umf.flows.pyramid import initial_noise, jump, jump_alpha
-    from umf.models.pflow import _stage_field, stage_scales
+    is, so the exact marginal field samples the same distribution with any churn (a
+    guided field is not one); a learnt field that is too smooth gets its noise-level
+    statistics pulled back. The last step of each stage is a plain Euler step; churn 0 is
+    the bundled Euler sampler."""
+    from umf.flows.pyramid import jump, jump_alpha
 
-    field = _stage_field(pflow.net, stage_scales(pflow.cfg), cond, uncond)
-    cfg = pflow.pyramid
-    x = initial_noise(cfg, b, pflow.latent_dim, generator=generator)
+    x, b = noise, len(noise)
     windows = cfg.windows
     for i, (w, n, c) in enumerate(zip(windows, steps, churn, strict=True)):
         stage = torch.full((b,), w.stage, dtype=torch.long)
@@ -295,8 +294,8 @@ def churn_sample(pflow, cond: dict, uncond: dict, b: int, churn: tuple[float, ..
             v = field(x, torch.full((b,), float(w.global_time(t_local))), stage=stage)
             if c > 0 and k < n - 1:
                 eps, scale = stage_noise_estimate(x, v, t_local, w, cfg.layout)
-                noise = torch.randn(x.shape, generator=generator)
-                x = x + (v - 0.5 * c * eps) / n + (c * scale / n) ** 0.5 * noise
+                step_noise = torch.randn(x.shape, generator=generator)
+                x = x + (v - 0.5 * c * eps) / n + (c * scale / n) ** 0.5 * step_noise
             else:
                 x = x + v / n
         if i + 1 < len(windows):
@@ -307,6 +306,8 @@ def churn_sample(pflow, cond: dict, uncond: dict, b: int, churn: tuple[float, ..
 
 
 def churn(args: argparse.Namespace) -> None:
+    from umf.flows.pyramid import initial_noise
+    from umf.models.pflow import _stage_field, stage_scales
     from umf.pipeline import UMFPipeline
 
     pipe = UMFPipeline.from_pretrained(args.model)
@@ -321,10 +322,12 @@ def churn(args: argparse.Namespace) -> None:
     for label in ("wave-right-hand", "walk"):
         prompt, names = MS.LABELS[label]
         cond, uncond = _conditions(pipe, prompt, 32)
+        field = _stage_field(pflow.net, stage_scales(pflow.cfg), cond, uncond)
         for c, steps in settings:
             gen = torch.Generator().manual_seed(0)
+            noise = initial_noise(pflow.pyramid, 32, pflow.latent_dim, generator=gen)
             with torch.no_grad():
-                z = churn_sample(pflow, cond, uncond, 32, c, steps, gen)
+                z = churn_sample(field, pflow.pyramid, noise, c, steps, gen)
             per = np.array([MS.median_statistics([j], list(names)) for j in
                             _joints(pipe, pflow.latent_norm.denormalize(z), 160)])  # fmt: skip
             med = ", ".join(f"{n} {m:.2f}" for n, m in zip(names, np.median(per, 0), strict=True))
@@ -343,7 +346,7 @@ def nyquist(args: argparse.Namespace) -> None:
     span = pipe.config.vae.token_span
     limit = 30.0 / span / 2  # half the latent's token rate (30 fps clips)
     clips = MS.real_clips_by_label(corpus, ("train", "val", "test"), ["wave-right-hand"])
-    clips = [c for c in clips["wave-right-hand"] if c.num_frames > 161]
+    clips = [c for c in clips["wave-right-hand"] if c.num_frames >= 161]
     feats = [corpus.clip_features(c)[0][:160] for c in clips]
     rec: list[np.ndarray] = []
     for i in range(0, len(feats), 32):
@@ -519,15 +522,17 @@ def overfit(args: argparse.Namespace) -> None:
     else:
         mu = _real_latents(pipe, corpus, "wave-right-hand", args.clips)
     if args.fresh or args.detail_norm:  # a new P-Flow: another size, or the detail normaliser
-        cfg = dataclasses.replace(pflow.cfg, detail_norm=args.detail_norm)
+        cfg = dataclasses.replace(pflow.cfg, detail_norm=args.detail_norm or pflow.cfg.detail_norm)
         if args.fresh:
             width, layers = (int(v) for v in args.fresh.split(","))
             den = dataclasses.replace(cfg.denoiser, d_model=width, num_layers=layers,
                                       ff_dim=2 * width)  # fmt: skip
             cfg = dataclasses.replace(cfg, denoiser=den)
         new = PFlow(cfg, pflow.num_tokens, pflow.latent_dim, pipe.text_encoder.dim)
-        if not args.fresh:  # the model's weights; only the normaliser's gains are new
-            new.load_state_dict(pflow.state_dict(), strict=False)
+        if not args.fresh:  # the model's weights; only the normaliser's gains may be new
+            keys = new.load_state_dict(pflow.state_dict(), strict=False)
+            if keys.unexpected_keys or set(keys.missing_keys) - {"latent_norm.detail_gain"}:
+                raise SystemExit(f"weights do not match the new P-Flow: {keys}")
         new.latent_norm.load_state_dict(units.state_dict(), strict=False)
         new.latent_norm.fit_detail(mu)  # no-op without detail_norm
         pflow = new

@@ -71,3 +71,43 @@ def test_stage_noise_estimate_recovers_the_noise_on_every_stage(layout):
             est, scale = wl.stage_noise_estimate(x, end - start, t, w, layout)
             assert torch.allclose(est, eps, atol=1e-5), (w, t)
             assert scale == pytest.approx(t * (1 - w.end) + (1 - t) * (1 - w.start))
+
+
+def _gaussian_pyramid_field(cfg, var: float):
+    """The exact velocity of a pyramid's paths for i.i.d. N(0, var) latents: per stage and
+    component (block means, detail), x = A X + S eps and v = B X + C eps with X and eps
+    independent Gaussians, so E[v | x] = (B A var_X + C S) / (A^2 var_X + S^2) x."""
+    from umf.flows.pyramid import split_detail
+
+    def field(x, t, *, stage):
+        w = cfg.window(int(stage[0]))
+        tl = (float(t[0]) - w.start) / (w.end - w.start)
+        s, e = w.start, w.end
+        var_x = var / cfg.block**w.level  # Down averages blocks of independent tokens
+        scale, c = tl * (1 - e) + (1 - tl) * (1 - s), s - e
+        parts = [(x, tl * e + (1 - tl) * s, e - s)]
+        if s > 0:
+            mean, detail = split_detail(x, cfg.layout)
+            parts = [(mean, tl * e + (1 - tl) * s, e - s), (detail, tl * e, e)]
+        return sum((b * a * var_x + c * scale) / (a * a * var_x + scale**2) * xx
+                   for xx, a, b in parts)  # fmt: skip
+
+    return field
+
+
+@pytest.mark.parametrize("churn", [(0.0, 0.0), (2.0, 2.0), (0.0, 8.0)])
+def test_churn_sampler_keeps_the_data_distribution_with_the_exact_field(churn):
+    """With the exact field, Langevin churn must not change what is sampled: Gaussian data
+    of variance 4 come out with variance 4 (a wrong sign of the Langevin term or a wrong
+    noise scale moves it far off)."""
+    from umf.flows.pyramid import PyramidConfig, initial_noise
+
+    wl = load_script("wave_latent")
+    cfg = PyramidConfig(layout="1d", num_stages=2, num_tokens=8)
+    g = torch.Generator().manual_seed(0)
+    noise = initial_noise(cfg, 2000, 1, generator=g)
+    x = wl.churn_sample(_gaussian_pyramid_field(cfg, 4.0), cfg, noise, churn, (200, 200), g)
+    assert x.shape == (2000, 8, 1)
+    assert float(x.var()) == pytest.approx(4.0, rel=0.06)
+    detail = x - wl.pair_mean(x)  # the fine stage's own part: variance 4 * 1/2
+    assert float(detail.var()) == pytest.approx(2.0, rel=0.06)
