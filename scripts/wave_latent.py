@@ -7,7 +7,7 @@
     python scripts/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
-        [--fresh WIDTH,LAYERS] [--detail-norm] [--corpus ...]
+        [--fresh WIDTH,LAYERS] [--detail-norm] [--seed S] [--corpus ...]
     python scripts/wave_latent.py churn MODEL_DIR
     python scripts/wave_latent.py nyquist MODEL_DIR
 
@@ -512,7 +512,7 @@ def overfit(args: argparse.Namespace) -> None:
     from umf.pipeline import UMFPipeline
     from umf.text import respell_prompt
 
-    torch.manual_seed(0)
+    torch.manual_seed(args.seed)
     corpus = Corpus.load(args.corpus)
     pipe = UMFPipeline.from_pretrained(args.model)
     pflow = pipe.pflow.float()
@@ -557,14 +557,15 @@ def overfit(args: argparse.Namespace) -> None:
 
     def sampled(name: str) -> torch.Tensor:
         z, _ = pflow.sample(text, empty, num_samples=16, dataset=0,  # single person, as trained
-                            generator=torch.Generator().manual_seed(1))  # fmt: skip
+                            generator=torch.Generator().manual_seed(args.seed + 1))  # fmt: skip
         dist, which = nearest(units.normalize(z), ref)
         row(name, z, f"{float(dist.median()):.3f} ({len(set(which.tolist()))})")
         return z
 
     what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"
     print(f"P-Flow trained on the latents of {what} {args.clips} real val + test waves "
-          f"alone ({len(mu)} latents), prompt {prompt!r}; 4 s, 16 people, seed 1")  # fmt: skip
+          f"alone ({len(mu)} latents), prompt {prompt!r}; 4 s, 16 people, "
+          f"seed {args.seed + 1}")  # fmt: skip
     print("| latents | neighbour step² | spread² | nearest real: dist² (distinct) "
           "| right-wrist speed (m/s) | swings/s |")  # fmt: skip
     print("|---|---:|---:|---:|---:|---:|")
@@ -574,7 +575,7 @@ def overfit(args: argparse.Namespace) -> None:
     batch = 64
     text_b, empty_b = expand_text(text, batch), expand_text(empty, batch)
     dataset = torch.zeros(batch, dtype=torch.long)
-    gen = torch.Generator().manual_seed(0)
+    gen = torch.Generator().manual_seed(args.seed)
     t0 = time.time()
     z = mu
     for step in range(1, args.steps + 1):
@@ -592,11 +593,19 @@ def overfit(args: argparse.Namespace) -> None:
     print("\nThe last sample, person by person, against its nearest real latent (160 frames):")
     print("| person | nearest real | dist² | generated: m/s, swings/s | that real: m/s, swings/s |")
     print("|---:|---:|---:|---|---|")
+    turns = lambda per_s: round(per_s * (len(gen_j[0]) - 1) / 30.0)  # noqa: E731
+    swinging = kept = of = 0
     for i in range(len(z)):
         g = MS.median_statistics([gen_j[i]], stats)
         r = MS.median_statistics([real_j[int(which[i])]], stats)
         print(f"| {i} | {int(which[i])} | {float(dist[i]):.3f} | {g[0]:.2f}, {g[1]:.2f} "
               f"| {r[0]:.2f}, {r[1]:.2f} |")  # fmt: skip
+        swinging += g[1] >= 1.0
+        if r[1] >= 1.0:  # its nearest real latent swings: did the person keep half its turns?
+            of += 1
+            kept += 2 * turns(g[1]) >= turns(r[1])
+    print(f"\n{swinging} of {len(z)} people swing at least once a second; {of} came nearest a "
+          f"real latent that does, {kept} of them kept at least half of its turns")  # fmt: skip
     swings = np.array([MS.median_statistics([j], stats)[1] for j in real_j])
     print(f"\nThe {len(mu)} real latents: swings/s quartiles "
           f"{' / '.join(f'{q:.2f}' for q in np.percentile(swings, [25, 50, 75]))}, "
@@ -684,6 +693,8 @@ def main() -> None:
     of.add_argument("--steps", type=int, default=600)
     of.add_argument("--fresh", default="",
                     help="WIDTH,LAYERS: train a new P-Flow of that size instead")  # fmt: skip
+    of.add_argument("--seed", type=int, default=0,
+                    help="training seed S (the people are sampled with seed S + 1)")  # fmt: skip
     of.add_argument("--detail-norm", action="store_true",
                     help="train with pflow.detail_norm (gains fitted on the latents)")  # fmt: skip
     of.add_argument(
