@@ -82,6 +82,7 @@ and the hand's side-to-side range, real and reconstructed.
 from __future__ import annotations
 
 import argparse
+import itertools
 import json
 import shutil
 import time
@@ -114,21 +115,24 @@ def time_variation(z: torch.Tensor) -> tuple[float, float]:
     return float(step), float(spread)
 
 
+def sq_distances(z: torch.Tensor, ref: torch.Tensor) -> torch.Tensor:
+    """(B, N) squared distances per element between latents z (B, p, r) and ref (N, p, r),
+    in float64."""
+    return torch.cdist(z.flatten(1).double(), ref.flatten(1).double()).pow(2) / ref[0].numel()
+
+
 def nearest(z: torch.Tensor, ref: torch.Tensor) -> tuple[torch.Tensor, torch.Tensor]:
     """For latents z (B, p, r): the squared distance per element to the nearest of ``ref``
     (N, p, r), and its index. A model that memorised ``ref`` gives distances far below those
     between the ``ref`` latents themselves."""
-    d = torch.cdist(z.flatten(1).double(), ref.flatten(1).double()).pow(2) / ref[0].numel()
-    dist, which = d.min(1)
+    dist, which = sq_distances(z, ref).min(1)
     return dist.float(), which
 
 
 def pair_mean(z: torch.Tensor) -> torch.Tensor:
     """Each pair of neighbouring tokens replaced by its mean (the 1-D pyramid's one-level
     down then up)."""
-    from umf.flows.pyramid import down_1d, up_1d
-
-    return up_1d(down_1d(z))
+    return split_detail(z, "1d")[0]
 
 
 def time_mean(z: torch.Tensor) -> torch.Tensor:
@@ -284,20 +288,22 @@ def churn_sample(field, cfg, noise: torch.Tensor, churn: tuple[float, ...],
     statistics pulled back. The last step of each stage is a plain Euler step; churn 0 is
     the bundled Euler sampler."""
     from umf.flows.pyramid import jump, jump_alpha
+    from umf.flows.solvers import time_grid
 
     x, b = noise, len(noise)
     windows = cfg.windows
     for i, (w, n, c) in enumerate(zip(windows, steps, churn, strict=True)):
         stage = torch.full((b,), w.stage, dtype=torch.long)
-        for k in range(n):
-            t_local = k / n
+        grid = time_grid(n)  # the grid sample_pyramid's Euler steps take
+        for k, (t_local, t_next) in enumerate(itertools.pairwise(grid)):
+            h = t_next - t_local
             v = field(x, torch.full((b,), float(w.global_time(t_local))), stage=stage)
             if c > 0 and k < n - 1:
                 eps, scale = stage_noise_estimate(x, v, t_local, w, cfg.layout)
                 step_noise = torch.randn(x.shape, generator=generator)
-                x = x + (v - 0.5 * c * eps) / n + (c * scale / n) ** 0.5 * step_noise
+                x = x + h * (v - 0.5 * c * eps) + (c * scale * h) ** 0.5 * step_noise
             else:
-                x = x + v / n
+                x = x + h * v
         if i + 1 < len(windows):
             s_next = windows[i + 1].start
             x = jump(x, s=s_next, e=w.end, alpha=jump_alpha(s_next, cfg.correlation),
@@ -354,10 +360,11 @@ def nyquist(args: argparse.Namespace) -> None:
     rows = []
     for clip, out in zip(clips, rec, strict=True):
         real = clip.joints[0][:161]
-        rows.append((swing_frequency(MS.sideways(real)),
+        real_side = MS.sideways(real)
+        rows.append((swing_frequency(real_side),
                      MS.motion_statistics(real)["right_wrist_swings"],
                      MS.motion_statistics(out)["right_wrist_swings"],
-                     np.ptp(MS.sideways(real)), np.ptp(MS.sideways(out))))  # fmt: skip
+                     np.ptp(real_side), np.ptp(MS.sideways(out))))  # fmt: skip
     table = np.array(rows)
     print(f"{len(table)} real waves of every split (their first 160 frames) encoded and "
           f"decoded; tokens of {span:g} frames: the latent's Nyquist frequency is "
@@ -412,8 +419,6 @@ def _fine_stage_start(pflow, z1: torch.Tensor):
     """(window, start) of the finest pyramid stage for standardised latents z1 (B, p, r):
     where the sampler hands over from the coarse stage, their block means plus noise
     (seed 0)."""
-    from umf.flows.pyramid import split_detail
-
     window = pflow.pyramid.window(1)
     eps = torch.randn(z1.shape, generator=torch.Generator().manual_seed(0))
     coarse, _ = split_detail(z1, pflow.pyramid.layout)
@@ -542,8 +547,7 @@ def overfit(args: argparse.Namespace) -> None:
         gains = ", with pflow.detail_norm (gains fitted on these latents)"
         print(f"{what}: {size:.2f} M parameters{gains if args.detail_norm else ''}")
     ref = units.normalize(mu)
-    apart = torch.cdist(ref.flatten(1), ref.flatten(1)).pow(2) / ref[0].numel()
-    apart = apart[~torch.eye(len(ref), dtype=torch.bool)]  # between two real latents
+    apart = sq_distances(ref, ref)[~torch.eye(len(ref), dtype=torch.bool)]  # two real ones
     prompt = respell_prompt(MS.LABELS["wave-right-hand"][0], pipe.config.text.respell)
     text, empty = pipe.text_encoder.encode([prompt]), pipe.text_encoder.encode([""])
     stats = ["right_wrist_energy", "right_wrist_swings"]
@@ -555,12 +559,14 @@ def overfit(args: argparse.Namespace) -> None:
         print(f"| {name} | {step:.3f} | {spread:.3f} | {near} | {speed:.2f} | {swings:.2f} |",
               flush=True)  # fmt: skip
 
-    def sampled(name: str) -> torch.Tensor:
+    def sampled(name: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
+        """16 people: their latents, and each one's distance to and index of its nearest
+        real latent."""
         z, _ = pflow.sample(text, empty, num_samples=16, dataset=0,  # single person, as trained
                             generator=torch.Generator().manual_seed(args.seed + 1))  # fmt: skip
         dist, which = nearest(units.normalize(z), ref)
         row(name, z, f"{float(dist.median()):.3f} ({len(set(which.tolist()))})")
-        return z
+        return z, dist, which
 
     what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"
     print(f"P-Flow trained on the latents of {what} {args.clips} real val + test waves "
@@ -570,14 +576,13 @@ def overfit(args: argparse.Namespace) -> None:
           "| right-wrist speed (m/s) | swings/s |")  # fmt: skip
     print("|---|---:|---:|---:|---:|---:|")
     row(f"the {len(mu)} real latents", mu, f"two of them: {float(apart.median()):.3f}")
-    sampled("generated, before")
+    z, dist, which = sampled("generated, before")
     opt = torch.optim.AdamW(pflow.parameters(), lr=2e-4)
     batch = 64
     text_b, empty_b = expand_text(text, batch), expand_text(empty, batch)
     dataset = torch.zeros(batch, dtype=torch.long)
     gen = torch.Generator().manual_seed(args.seed)
     t0 = time.time()
-    z = mu
     for step in range(1, args.steps + 1):
         pflow.train()
         idx = torch.randint(0, len(mu), (batch,), generator=gen)
@@ -586,18 +591,21 @@ def overfit(args: argparse.Namespace) -> None:
         loss.backward()
         opt.step()
         if step % 200 == 0:
-            z = sampled(f"generated, after {step} steps ({time.time() - t0:.0f} s)")
+            z, dist, which = sampled(f"generated, after {step} steps ({time.time() - t0:.0f} s)")
     # each person of the last sample beside the real latent it came nearest to, decoded
-    dist, which = nearest(units.normalize(z), ref)
     gen_j, real_j = _joints(pipe, z, 160), _joints(pipe, mu, 160)
     print("\nThe last sample, person by person, against its nearest real latent (160 frames):")
     print("| person | nearest real | dist² | generated: m/s, swings/s | that real: m/s, swings/s |")
     print("|---:|---:|---:|---|---|")
-    turns = lambda per_s: round(per_s * (len(gen_j[0]) - 1) / 30.0)  # noqa: E731
+    real_stats = [MS.median_statistics([j], stats) for j in real_j]  # speed, swings/s each
+    seconds = (len(gen_j[0]) - 1) / 30.0
+
+    def turns(per_second: float) -> int:
+        return round(per_second * seconds)
+
     swinging = kept = of = 0
     for i in range(len(z)):
-        g = MS.median_statistics([gen_j[i]], stats)
-        r = MS.median_statistics([real_j[int(which[i])]], stats)
+        g, r = MS.median_statistics([gen_j[i]], stats), real_stats[int(which[i])]
         print(f"| {i} | {int(which[i])} | {float(dist[i]):.3f} | {g[0]:.2f}, {g[1]:.2f} "
               f"| {r[0]:.2f}, {r[1]:.2f} |")  # fmt: skip
         swinging += g[1] >= 1.0
@@ -606,7 +614,7 @@ def overfit(args: argparse.Namespace) -> None:
             kept += 2 * turns(g[1]) >= turns(r[1])
     print(f"\n{swinging} of {len(z)} people swing at least once a second; {of} came nearest a "
           f"real latent that does, {kept} of them kept at least half of its turns")  # fmt: skip
-    swings = np.array([MS.median_statistics([j], stats)[1] for j in real_j])
+    swings = np.array([swings_per_s for _, swings_per_s in real_stats])
     print(f"\nThe {len(mu)} real latents: swings/s quartiles "
           f"{' / '.join(f'{q:.2f}' for q in np.percentile(swings, [25, 50, 75]))}, "
           f"{int((swings == 0).sum())} with none")  # fmt: skip

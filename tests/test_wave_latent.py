@@ -111,3 +111,25 @@ def test_churn_sampler_keeps_the_data_distribution_with_the_exact_field(churn):
     assert float(x.var()) == pytest.approx(4.0, rel=0.06)
     detail = x - wl.pair_mean(x)  # the fine stage's own part: variance 4 * 1/2
     assert float(detail.var()) == pytest.approx(2.0, rel=0.06)
+
+
+def test_churn_sampler_without_churn_is_the_pyramid_sampler():
+    """Churn 0 must take exactly sample_pyramid's Euler steps and jumps (the same field,
+    noise and generator): the script's copy of the stage loop may not drift from it."""
+    from umf.flows.pyramid import PyramidConfig, initial_noise, sample_pyramid
+
+    wl = load_script("wave_latent")
+    cfg = PyramidConfig(layout="1d", num_stages=3, num_tokens=16)
+
+    def field(x, t, *, stage):  # nonlinear in x, t and the stage
+        return torch.tanh(x * (1.0 + t[:, None, None])) - 0.3 * stage[:, None, None] * x
+
+    noise = initial_noise(cfg, 6, 4, generator=torch.Generator().manual_seed(0))
+    ours = wl.churn_sample(field, cfg, noise, (0.0,) * 3, (7, 5, 3),
+                           torch.Generator().manual_seed(1))  # fmt: skip
+    theirs = sample_pyramid(field, noise, cfg, steps=(7, 5, 3), method="euler",
+                            generator=torch.Generator().manual_seed(1)).x  # fmt: skip
+    assert torch.allclose(ours, theirs, atol=1e-6)
+    other = sample_pyramid(field, noise, cfg, steps=(7, 5, 3),
+                           generator=torch.Generator().manual_seed(2)).x  # fmt: skip
+    assert not torch.allclose(ours, other, atol=1e-3)  # the jumps' noise matters
