@@ -7,6 +7,7 @@
     python scripts/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
+        [--split train]
         [--fresh WIDTH,LAYERS] [--detail-norm] [--seed S] [--corpus ...]
     python scripts/wave_latent.py churn MODEL_DIR
     python scripts/wave_latent.py nyquist MODEL_DIR
@@ -49,7 +50,8 @@ noise added (in the P-Flow's standardised units: everywhere, in the fine detail 
 the pair means only), and with their fine detail shrunk, decoded: wrist speed and swings.
 
 ``overfit``: can the P-Flow make a swing at all? It is trained (AdamW, lr 2e-4, batches of
-64) on the latents of ``--clips`` real val + test waves alone (their first 160 frames, or
+64) on the latents of ``--clips`` real val + test waves alone (``--split train``: training
+waves; their first 160 frames, or
 with ``--crops K`` K random 160-frame crops of each, canonical at the crop's start as in
 training, so that the swing's phase is random), with the label's prompt, and
 every 200 steps 16 people are sampled with that prompt: the time variation of their
@@ -84,6 +86,7 @@ from __future__ import annotations
 import argparse
 import itertools
 import json
+import math
 import shutil
 import time
 from pathlib import Path
@@ -390,28 +393,42 @@ def detail_retention(estimate: torch.Tensor, truth: torch.Tensor) -> tuple[float
     return float(d_est.pow(2).sum()) / energy, float((d_est * d_true).sum()) / energy
 
 
-def _real_latents(pipe, corpus, label: str, limit: int | None = None) -> torch.Tensor:
-    """Posterior means of real val + test clips of ``label`` (their first 160 frames)."""
-    clips = MS.real_clips_by_label(corpus, ("val", "test"), [label])[label]
+def _real_latents(
+    pipe, corpus, label: str, limit: int | None = None, splits: tuple[str, ...] = ("val", "test")
+) -> torch.Tensor:
+    """Posterior means of real clips of ``label`` in ``splits`` (their first 160 frames)."""
+    clips = MS.real_clips_by_label(corpus, splits, [label])[label]
     feats = [f for c in clips if len(f := corpus.clip_features(c)[0][:160]) == 160]
     return _encode(pipe, feats[:limit])
 
 
-def _crop_latents(pipe, corpus, label: str, clips: int, crops: int) -> torch.Tensor:
+def _crop_latents(
+    pipe,
+    corpus,
+    label: str,
+    clips: int,
+    crops: int,
+    splits: tuple[str, ...] = ("val", "test"),
+    mirror: bool = False,
+    captions: list[str] | None = None,
+) -> torch.Tensor:
     """Posterior means of ``crops`` random 160-frame crops of each of the first ``clips``
-    val + test clips of ``label`` at least 160 frames long, each canonical at its own start
+    clips of ``label`` in ``splits`` at least 160 frames long, each canonical at its own start
     as the P-Flow's training crops are (not mirrored): the swing's phase at the crop's start
     is then random, as in training."""
     from umf.train.datasets import SingleMotionDataset
 
-    kw = dict(min_frames=160, max_frames=160, mirror=False, labels=[label])
-    ds = [SingleMotionDataset(corpus, split, pipe.normalizer, **kw) for split in ("val", "test")]
+    kw = dict(min_frames=160, max_frames=160, mirror=mirror, labels=[label])
+    ds = [SingleMotionDataset(corpus, split, pipe.normalizer, **kw) for split in splits]
     items = [(d, i) for d in ds for i in range(len(d)) if d.items[i][0].num_frames > 160]
     feats = []
     for epoch in range(crops):
         for d, i in items[:clips]:
             d.set_epoch(epoch)
-            feats.append(d[i]["features"])
+            item = d[i]
+            feats.append(item["features"])
+            if captions is not None:  # each crop's own caption (mirrored with it), as trained
+                captions.append(item["caption"])
     return _encode_normalized(pipe, torch.stack(feats).float())
 
 
@@ -508,6 +525,10 @@ def perturb(args: argparse.Namespace) -> None:
     print("| decoded | " + " | ".join(cells) + " |", flush=True)
 
 
+CAPTIONS = {None: "with the prompt", "own": "each with its own caption",
+            "shuffled": "each with another crop's caption (shuffled)"}  # fmt: skip
+
+
 def overfit(args: argparse.Namespace) -> None:
     import dataclasses
 
@@ -515,17 +536,22 @@ def overfit(args: argparse.Namespace) -> None:
     from umf.models.denoiser import expand_text
     from umf.models.pflow import PFlow
     from umf.pipeline import UMFPipeline
-    from umf.text import respell_prompt
+    from umf.text import TextFeatures, respell_prompt
 
     torch.manual_seed(args.seed)
     corpus = Corpus.load(args.corpus)
     pipe = UMFPipeline.from_pretrained(args.model)
     pflow = pipe.pflow.float()
+    splits = ("train",) if args.split == "train" else ("val", "test")
+    captions: list[str] | None = [] if args.captions else None
+    if (args.mirror or args.captions) and not args.crops:
+        raise SystemExit("--mirror and --captions need --crops")
     units = pflow.latent_norm  # distances in the model's own standardised units, either way
     if args.crops:
-        mu = _crop_latents(pipe, corpus, "wave-right-hand", args.clips, args.crops)
+        mu = _crop_latents(pipe, corpus, "wave-right-hand", args.clips, args.crops, splits,
+                           args.mirror, captions)  # fmt: skip
     else:
-        mu = _real_latents(pipe, corpus, "wave-right-hand", args.clips)
+        mu = _real_latents(pipe, corpus, "wave-right-hand", args.clips, splits)
     if args.fresh or args.detail_norm:  # a new P-Flow: another size, or the detail normaliser
         cfg = dataclasses.replace(pflow.cfg, detail_norm=args.detail_norm or pflow.cfg.detail_norm)
         if args.fresh:
@@ -562,15 +588,21 @@ def overfit(args: argparse.Namespace) -> None:
     def sampled(name: str) -> tuple[torch.Tensor, torch.Tensor, torch.Tensor]:
         """16 people: their latents, and each one's distance to and index of its nearest
         real latent."""
+        scale = {} if args.guidance is None else {"guidance": args.guidance}
         z, _ = pflow.sample(text, empty, num_samples=16, dataset=0,  # single person, as trained
-                            generator=torch.Generator().manual_seed(args.seed + 1))  # fmt: skip
+                            generator=torch.Generator().manual_seed(args.seed + 1),
+                            **scale)  # fmt: skip
         dist, which = nearest(units.normalize(z), ref)
         row(name, z, f"{float(dist.median()):.3f} ({len(set(which.tolist()))})")
         return z, dist, which
 
+    scale_used = pflow.cfg.guidance if args.guidance is None else args.guidance
+    mix = f", a random crop's caption at chance {args.caption_mix}" if args.caption_mix else ""
     what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"
-    print(f"P-Flow trained on the latents of {what} {args.clips} real val + test waves "
-          f"alone ({len(mu)} latents), prompt {prompt!r}; 4 s, 16 people, "
+    print(f"P-Flow trained on the latents of {what} {args.clips} real {' + '.join(splits)} "
+          f"waves alone ({len(mu)} latents{', mirrored at random' if args.mirror else ''}), "
+          f"{CAPTIONS[args.captions]}{mix}; sampled "
+          f"with the prompt {prompt!r} (guidance {scale_used}); 4 s, 16 people, "
           f"seed {args.seed + 1}")  # fmt: skip
     print("| latents | neighbour step² | spread² | nearest real: dist² (distinct) "
           "| right-wrist speed (m/s) | swings/s |")  # fmt: skip
@@ -578,18 +610,38 @@ def overfit(args: argparse.Namespace) -> None:
     row(f"the {len(mu)} real latents", mu, f"two of them: {float(apart.median()):.3f}")
     z, dist, which = sampled("generated, before")
     opt = torch.optim.AdamW(pflow.parameters(), lr=2e-4)
+    # --cosine: the learning rate falls to 0 at the last step, as `umf train` anneals it
+    sched = torch.optim.lr_scheduler.LambdaLR(
+        opt, lambda s: 0.5 * (1 + math.cos(math.pi * s / args.steps)) if args.cosine else 1.0
+    )
     batch = 64
     text_b, empty_b = expand_text(text, batch), expand_text(empty, batch)
+    if captions and args.captions == "shuffled":  # varied text that says nothing of the crop
+        order = torch.randperm(len(captions), generator=torch.Generator().manual_seed(args.seed))
+        captions = [captions[i] for i in order.tolist()]
+    if captions:  # every crop's own caption: the text of a batch is gathered per crop
+        names = sorted(set(captions))
+        table = pipe.text_encoder.encode(names)
+        of_crop = torch.tensor([names.index(c) for c in captions])
     dataset = torch.zeros(batch, dtype=torch.long)
     gen = torch.Generator().manual_seed(args.seed)
     t0 = time.time()
     for step in range(1, args.steps + 1):
         pflow.train()
         idx = torch.randint(0, len(mu), (batch,), generator=gen)
+        if captions:
+            rows = of_crop[idx]
+            if args.caption_mix:  # each sample, with this chance, takes a random crop's caption
+                swap = torch.rand(batch, generator=gen) < args.caption_mix
+                rows = torch.where(
+                    swap, of_crop[torch.randint(0, len(mu), (batch,), generator=gen)], rows
+                )
+            text_b = TextFeatures(table.tokens[rows], table.mask[rows], table.pooled[rows])
         loss = pflow.loss(mu[idx], text_b, empty_b, dataset=dataset, generator=gen)["total"]
         opt.zero_grad()
         loss.backward()
         opt.step()
+        sched.step()
         if step % 200 == 0:
             z, dist, which = sampled(f"generated, after {step} steps ({time.time() - t0:.0f} s)")
     # each person of the last sample beside the real latent it came nearest to, decoded
@@ -705,6 +757,23 @@ def main() -> None:
                     help="training seed S (the people are sampled with seed S + 1)")  # fmt: skip
     of.add_argument("--detail-norm", action="store_true",
                     help="train with pflow.detail_norm (gains fitted on the latents)")  # fmt: skip
+    of.add_argument("--cosine", action="store_true",
+                    help="anneal the learning rate to 0 (cosine), as umf train does")  # fmt: skip
+    of.add_argument(
+        "--mirror",
+        action="store_true",
+        help="mirror half the crops (left-hand waves, captions swapped), as trained",
+    )
+    of.add_argument("--captions", choices=["own", "shuffled"], default=None,
+                    help="train each crop with its own caption (or one of another crop's), "
+                    "not the prompt")  # fmt: skip
+    of.add_argument("--guidance", type=float, default=None,
+                    help="sample at this guidance scale (default: the model's)")  # fmt: skip
+    of.add_argument("--caption-mix", type=float, default=0.0,
+                    help="with --captions own: the chance that a sample takes a random crop's "
+                    "caption at each step")  # fmt: skip
+    of.add_argument("--split", choices=["val+test", "train"], default="val+test",
+                    help="the held-out waves (default) or the training ones")  # fmt: skip
     of.add_argument(
         "--crops",
         type=int,

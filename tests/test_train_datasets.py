@@ -532,3 +532,54 @@ def test_respelling_reaches_the_training_splits_only(corpus):
     for kind in ("single", "interaction"):
         train, val = evaluator_loaders(corpus, kind, t, 60, 4)
         assert train.dataset.respell and not val.dataset.dataset.respell
+
+
+def test_caption_mix_draws_captions_of_the_same_label_only(corpus, monkeypatch):
+    """``caption_mix`` swaps an item's caption for one of a random clip of its content label
+    at about the asked rate (the clip itself may be drawn), never across labels, and leaves
+    every other draw (crop, mirror, features) as without it."""
+    clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
+    assert len(clips) >= 6
+    owner = {}
+    for i, clip in enumerate(clips):
+        label = "wave" if i % 2 else "walk"
+        monkeypatch.setitem(clip.meta, "content", label)
+        said = [f"clip {i} take {k}." for k in range(2)]  # no side words: mirroring keeps them
+        monkeypatch.setattr(clip, "captions", said)
+        owner.update({c: (clip.id, label) for c in said})
+    kw = dict(min_frames=20, max_frames=60, mirror=True, seed=5)
+    plain = D.SingleMotionDataset(corpus, "train", None, **kw)
+    for mix in (0.5, 1.0):
+        mixed = D.SingleMotionDataset(corpus, "train", None, caption_mix=mix, **kw)
+        swapped = total = 0
+        for epoch in range(6):
+            plain.set_epoch(epoch), mixed.set_epoch(epoch)
+            for i, (clip, _, _) in enumerate(plain.items):
+                if clip.num_people != 1:
+                    continue
+                a, b = plain[i], mixed[i]
+                assert (a["start"], a["length"], a["mirrored"]) == (b["start"], b["length"],
+                                                                    b["mirrored"])  # fmt: skip
+                torch.testing.assert_close(a["features"], b["features"])
+                whose, label = owner[b["caption"]]
+                assert label == clip.meta["content"]
+                swapped += whose != clip.id
+                total += 1
+        group = len(clips) / 2  # the draw may land on the clip itself: mix * (1 - 1/group)
+        want = mix * (1 - 1 / group)
+        assert abs(swapped / total - want) < 0.15, (mix, swapped, total, want)
+    for bad in (-0.1, 1.5):
+        with pytest.raises(UMFError, match="caption_mix must be between 0 and 1"):
+            D.SingleMotionDataset(corpus, "train", None, caption_mix=bad)
+
+
+def test_caption_mix_reaches_the_training_split_only(corpus):
+    from umf.config import small_config
+    from umf.train.run import _loaders
+
+    cfg = small_config()
+    t = dataclasses.replace(cfg.train_pflow, caption_mix=0.5, num_workers=0)
+    train, val, _ = _loaders("pflow", corpus, cfg, t, progress=False)
+    single = [dl.dataset for dl in train.loaders if isinstance(dl.dataset, D.SingleMotionDataset)]
+    assert [ds.caption_mix for ds in single] == [0.5]
+    assert all(getattr(dl.dataset, "caption_mix", 0.0) == 0.0 for dl in val.loaders)

@@ -392,6 +392,12 @@ class SingleMotionDataset(_EpochDataset):
     a steady gait are served whole, then held / their last cycle repeated, up to a crop
     length in [min_frames, max_frames] (module notes); ``extended`` maps (clip id, person) to
     the period repeated (0: held).
+    ``caption_mix``: the chance that an item's caption is drawn from a random clip of its
+    content label instead of its own. Why: the Bandai captions are written per clip and
+    style, so a prompt stands for a handful of clips, and a small P-Flow learns to copy a
+    few of their crops, the stillest, instead of their motion (a wave without its swing;
+    ``results/wave-20261127``, section 10). Mixed captions keep what the label says and
+    loosen the tie between a wording and a clip.
     """
 
     def __init__(
@@ -410,11 +416,15 @@ class SingleMotionDataset(_EpochDataset):
         hold_rest: bool = False,
         repeat_gait: bool = False,
         labels: Sequence[str] = (),
+        caption_mix: float = 0.0,
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
         if not 0 <= balance <= 1:
             raise UMFError(f"balance_labels must be between 0 and 1, got {balance}")
+        if not 0 <= caption_mix <= 1:
+            raise UMFError(f"caption_mix must be between 0 and 1, got {caption_mix}")
+        self.caption_mix = caption_mix
         self.normalizer = normalizer
         self.min_frames, self.max_frames = min_frames, max_frames
         self.random_placement, self.mirror = random_placement, mirror
@@ -443,9 +453,26 @@ class SingleMotionDataset(_EpochDataset):
             self.items = [
                 item for item, r in zip(self.items, repeats, strict=True) for _ in range(r)
             ]
+        # the captioned clips of each content label, for caption_mix
+        self.same_label: dict[str, list[MotionClip]] = {}
+        for clip, _, _ in self.items:
+            label = clip.meta.get("content")
+            if label is not None and clip.captions:
+                group = self.same_label.setdefault(label, [])
+                if not group or group[-1] is not clip:
+                    group.append(clip)
 
     def __len__(self) -> int:
         return len(self.items)
+
+    def _mixed_caption(self, clip: MotionClip, caption: str, rng: np.random.Generator) -> str:
+        """With chance ``caption_mix``, a caption of a random clip of the same content label
+        (the clip itself included; clips without a content label keep their own)."""
+        group = self.same_label.get(clip.meta.get("content"), [])
+        if not group or rng.random() >= self.caption_mix:
+            return caption
+        other = group[int(rng.integers(len(group)))]
+        return other.captions[int(rng.integers(len(other.captions)))]
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         clip, person, tf = self.items[index]
@@ -456,6 +483,9 @@ class SingleMotionDataset(_EpochDataset):
         else:
             start, length = crop_window(rng, clip.num_frames - 1, self.min_frames, self.max_frames)
         caption = clip.captions[int(rng.integers(len(clip.captions)))] if clip.captions else ""
+        if self.caption_mix:  # its own generator, so every other draw stays as without it
+            mix_rng = np.random.default_rng([self.seed % 2**63, self.epoch, index, 1])
+            caption = self._mixed_caption(clip, caption, mix_rng)
         f = canonicalize_features(_clip_crop(clip, tf, [person], start, length, period or 0))[0]
         if self.random_placement:
             yaw = float(rng.uniform(-math.pi, math.pi))

@@ -123,7 +123,9 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
             ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
                                      hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
-                                     labels=t.labels, **common)  # fmt: skip
+                                     labels=t.labels,
+                                     caption_mix=t.caption_mix if train else 0.0,
+                                     **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
         bank = None
