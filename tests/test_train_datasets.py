@@ -535,22 +535,27 @@ def test_respelling_reaches_the_training_splits_only(corpus):
 
 
 def test_caption_mix_draws_captions_of_the_same_label_only(corpus, monkeypatch):
-    """``caption_mix`` swaps an item's caption for one of a random clip of its content label
-    at about the asked rate (the clip itself may be drawn), never across labels, and leaves
-    every other draw (crop, mirror, features) as without it."""
+    """``caption_mix`` swaps an item's caption for one of a random clip of its group (content
+    label and style by default, or the keys asked) at about the asked rate (the clip itself
+    may be drawn), never across groups, and leaves every other draw (crop, mirror, features)
+    as without it."""
     clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
-    assert len(clips) >= 6
+    assert len(clips) >= 8
     owner = {}
     for i, clip in enumerate(clips):
-        label = "wave" if i % 2 else "walk"
+        label, style = ("wave" if i % 2 else "walk"), ("old" if i % 4 < 2 else "young")
         monkeypatch.setitem(clip.meta, "content", label)
+        monkeypatch.setitem(clip.meta, "style", style)
         said = [f"clip {i} take {k}." for k in range(2)]  # no side words: mirroring keeps them
         monkeypatch.setattr(clip, "captions", said)
-        owner.update({c: (clip.id, label) for c in said})
+        owner.update({c: (clip.id, (label, style)) for c in said})
     kw = dict(min_frames=20, max_frames=60, mirror=True, seed=5)
     plain = D.SingleMotionDataset(corpus, "train", None, **kw)
-    for mix in (0.5, 1.0):
-        mixed = D.SingleMotionDataset(corpus, "train", None, caption_mix=mix, **kw)
+    cases = [(0.5, ("content", "style")), (1.0, ("content", "style")), (1.0, ("content",))]
+    for mix, within in cases:
+        mixed = D.SingleMotionDataset(corpus, "train", None, caption_mix=mix,
+                                      caption_mix_within=within, **kw)  # fmt: skip
+        crossed_style = 0
         swapped = total = 0
         for epoch in range(6):
             plain.set_epoch(epoch), mixed.set_epoch(epoch)
@@ -561,16 +566,47 @@ def test_caption_mix_draws_captions_of_the_same_label_only(corpus, monkeypatch):
                 assert (a["start"], a["length"], a["mirrored"]) == (b["start"], b["length"],
                                                                     b["mirrored"])  # fmt: skip
                 torch.testing.assert_close(a["features"], b["features"])
-                whose, label = owner[b["caption"]]
+                whose, (label, style) = owner[b["caption"]]
                 assert label == clip.meta["content"]
+                if "style" in within:
+                    assert style == clip.meta["style"]
+                crossed_style += style != clip.meta["style"]
                 swapped += whose != clip.id
                 total += 1
-        group = len(clips) / 2  # the draw may land on the clip itself: mix * (1 - 1/group)
+        group = len(clips) / 2 ** len(within)  # the draw may be the clip itself
         want = mix * (1 - 1 / group)
-        assert abs(swapped / total - want) < 0.15, (mix, swapped, total, want)
+        assert abs(swapped / total - want) < 0.15, (mix, within, swapped, total, want)
+        assert (crossed_style > 0) == ("style" not in within)
     for bad in (-0.1, 1.5):
         with pytest.raises(UMFError, match="caption_mix must be between 0 and 1"):
             D.SingleMotionDataset(corpus, "train", None, caption_mix=bad)
+
+
+def test_caption_mix_from_draws_only_the_matching_clips(corpus, monkeypatch):
+    """``caption_mix_from`` ["style=old"]: mixed captions come from old-style clips of the
+    item's label only, so an unmarked wording can stand for every style of its label."""
+    clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
+    owner = {}
+    for i, clip in enumerate(clips):
+        style = "old" if i % 3 == 0 else "young"
+        monkeypatch.setitem(clip.meta, "content", "walk")
+        monkeypatch.setitem(clip.meta, "style", style)
+        said = [f"clip {i} take {k}." for k in range(2)]
+        monkeypatch.setattr(clip, "captions", said)
+        owner.update({c: (clip.id, style) for c in said})
+    mix = dict(caption_mix=1.0, caption_mix_within=("content",), caption_mix_from=("style=old",))
+    ds = D.SingleMotionDataset(corpus, "train", None, 20, 60, seed=2, **mix)
+    seen = set()
+    for epoch in range(4):
+        ds.set_epoch(epoch)
+        for i, (clip, _, _) in enumerate(ds.items):
+            if clip.num_people == 1:
+                whose, style = owner[ds[i]["caption"]]
+                assert style == "old"
+                seen.add(whose)
+    assert len(seen) > 1  # several donors, not one
+    with pytest.raises(UMFError, match="caption_mix_from takes key=value pairs"):
+        D.SingleMotionDataset(corpus, "train", None, caption_mix=0.5, caption_mix_from=("old",))
 
 
 def test_caption_mix_reaches_the_training_split_only(corpus):

@@ -240,10 +240,14 @@ class TrainConfig:
     # give half the training captions the other spelling of direction words (backwards <->
     # backward, forwards <-> forward, towards <-> toward; umf.train.datasets.respell_caption)
     respell_captions: bool = False
-    # single-person items take, with this chance, the caption of a random clip of their content
-    # label instead of their own (umf.train.datasets.SingleMotionDataset): a per-clip caption
-    # then no longer names a few crops for the flow to copy (0 = always their own)
+    # single-person items take, with this chance, the caption of a random clip that shares
+    # their caption_mix_within metadata (content label and style) instead of their own
+    # (umf.train.datasets.SingleMotionDataset): a per-clip wording then no longer names a few
+    # crops for the flow to copy (0 = always their own)
     caption_mix: float = 0.0
+    caption_mix_within: tuple[str, ...] = ("content", "style")
+    # and only from clips whose metadata match these "key=value" pairs (e.g. style=normal)
+    caption_mix_from: tuple[str, ...] = ()
     # single-person clips shorter than min_frames whose body ends at rest are held in their
     # last pose up to a full crop (umf.train.datasets.ends_at_rest): the flow learns that a
     # gesture ends standing, not what the latent of absent frames decodes to

@@ -393,11 +393,13 @@ class SingleMotionDataset(_EpochDataset):
     length in [min_frames, max_frames] (module notes); ``extended`` maps (clip id, person) to
     the period repeated (0: held).
     ``caption_mix``: the chance that an item's caption is drawn from a random clip of its
-    content label instead of its own. Why: the Bandai captions are written per clip and
-    style, so a prompt stands for a handful of clips, and a small P-Flow learns to copy a
-    few of their crops, the stillest, instead of their motion (a wave without its swing;
-    ``results/wave-20261127``, section 10). Mixed captions keep what the label says and
-    loosen the tie between a wording and a clip.
+    group instead of its own, the group being the clips that share the metadata keys
+    ``caption_mix_within`` (default content label and style) and, of those, only the clips
+    whose metadata match every ``caption_mix_from`` "key=value" (e.g. ``style=normal``: the
+    unmarked wordings of a label, which then stand for all of its styles). Why: the Bandai
+    captions are written per clip and style, so a wording stands for a handful of clips, and
+    a small P-Flow learns to copy a few of their crops, the stillest, instead of their
+    motion (a wave without its swing; ``results/wave-20261127``, section 10).
     """
 
     def __init__(
@@ -417,6 +419,8 @@ class SingleMotionDataset(_EpochDataset):
         repeat_gait: bool = False,
         labels: Sequence[str] = (),
         caption_mix: float = 0.0,
+        caption_mix_within: Sequence[str] = ("content", "style"),
+        caption_mix_from: Sequence[str] = (),
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
@@ -453,22 +457,33 @@ class SingleMotionDataset(_EpochDataset):
             self.items = [
                 item for item, r in zip(self.items, repeats, strict=True) for _ in range(r)
             ]
-        # the captioned clips of each content label, for caption_mix
-        self.same_label: dict[str, list[MotionClip]] = {}
+        # the captioned clips of each group (content label, style ...), for caption_mix
+        self.mix_within = tuple(caption_mix_within)
+        mix_from = [pair.split("=", 1) for pair in caption_mix_from]
+        if any(len(pair) != 2 for pair in mix_from):
+            raise UMFError(f"caption_mix_from takes key=value pairs, got {list(caption_mix_from)}")
+        self.mix_groups: dict[tuple, list[MotionClip]] = {}
         for clip, _, _ in self.items:
-            label = clip.meta.get("content")
-            if label is not None and clip.captions:
-                group = self.same_label.setdefault(label, [])
+            key = self._mix_key(clip)
+            donor = all(str(clip.meta.get(k)) == v for k, v in mix_from)
+            if key is not None and clip.captions and donor:
+                group = self.mix_groups.setdefault(key, [])
                 if not group or group[-1] is not clip:
                     group.append(clip)
 
     def __len__(self) -> int:
         return len(self.items)
 
+    def _mix_key(self, clip: MotionClip) -> tuple | None:
+        """The clip's group for caption_mix; None (keeps its own) if a key is missing."""
+        key = tuple(clip.meta.get(k) for k in self.mix_within)
+        return None if None in key else key
+
     def _mixed_caption(self, clip: MotionClip, caption: str, rng: np.random.Generator) -> str:
-        """With chance ``caption_mix``, a caption of a random clip of the same content label
-        (the clip itself included; clips without a content label keep their own)."""
-        group = self.same_label.get(clip.meta.get("content"), [])
+        """With chance ``caption_mix``, a caption of a random clip of the same group (the
+        clip itself included; clips without the group's keys keep their own)."""
+        key = self._mix_key(clip)
+        group = self.mix_groups.get(key, []) if key is not None else []
         if not group or rng.random() >= self.caption_mix:
             return caption
         other = group[int(rng.integers(len(group)))]

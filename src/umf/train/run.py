@@ -125,6 +125,8 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                                      hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
                                      labels=t.labels,
                                      caption_mix=t.caption_mix if train else 0.0,
+                                     caption_mix_within=t.caption_mix_within,
+                                     caption_mix_from=t.caption_mix_from,
                                      **common)  # fmt: skip
         else:
             ds = SceneDataset(corpus, split, corpus.normalizer, **common)
