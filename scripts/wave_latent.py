@@ -7,7 +7,8 @@
     python scripts/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
     python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
-        [--split train]
+        [--split train] [--cosine] [--captions own|shuffled] [--caption-mix Q] [--mirror]
+        [--guidance G]
         [--fresh WIDTH,LAYERS] [--detail-norm] [--seed S] [--corpus ...]
     python scripts/wave_latent.py churn MODEL_DIR
     python scripts/wave_latent.py nyquist MODEL_DIR
@@ -414,8 +415,8 @@ def _crop_latents(
 ) -> torch.Tensor:
     """Posterior means of ``crops`` random 160-frame crops of each of the first ``clips``
     clips of ``label`` in ``splits`` at least 160 frames long, each canonical at its own start
-    as the P-Flow's training crops are (not mirrored): the swing's phase at the crop's start
-    is then random, as in training."""
+    as the P-Flow's training crops are (mirrored at random with ``mirror``): the swing's
+    phase at the crop's start is then random, as in training."""
     from umf.train.datasets import SingleMotionDataset
 
     kw = dict(min_frames=160, max_frames=160, mirror=mirror, labels=[label])
@@ -546,6 +547,10 @@ def overfit(args: argparse.Namespace) -> None:
     captions: list[str] | None = [] if args.captions else None
     if (args.mirror or args.captions) and not args.crops:
         raise SystemExit("--mirror and --captions need --crops")
+    if (args.mirror or args.caption_mix) and args.captions != "own":
+        raise SystemExit("--mirror and --caption-mix need --captions own (the crops' captions)")
+    if not 0 <= args.caption_mix <= 1:
+        raise SystemExit(f"--caption-mix must be between 0 and 1, got {args.caption_mix}")
     units = pflow.latent_norm  # distances in the model's own standardised units, either way
     if args.crops:
         mu = _crop_latents(pipe, corpus, "wave-right-hand", args.clips, args.crops, splits,
@@ -597,11 +602,12 @@ def overfit(args: argparse.Namespace) -> None:
         return z, dist, which
 
     scale_used = pflow.cfg.guidance if args.guidance is None else args.guidance
+    schedule = "cosine to 0" if args.cosine else "constant"
     mix = f", a random crop's caption at chance {args.caption_mix}" if args.caption_mix else ""
     what = f"{args.crops} random crops each of" if args.crops else "the first 160 frames of"
     print(f"P-Flow trained on the latents of {what} {args.clips} real {' + '.join(splits)} "
           f"waves alone ({len(mu)} latents{', mirrored at random' if args.mirror else ''}), "
-          f"{CAPTIONS[args.captions]}{mix}; sampled "
+          f"{CAPTIONS[args.captions]}{mix}; lr 2e-4 {schedule}; sampled "
           f"with the prompt {prompt!r} (guidance {scale_used}); 4 s, 16 people, "
           f"seed {args.seed + 1}")  # fmt: skip
     print("| latents | neighbour step² | spread² | nearest real: dist² (distinct) "

@@ -2,15 +2,15 @@
 
 A wave is a side-to-side swing of the raised hand (about once a second); five still frames
 cannot show it, and a hand held up still looks like a wave in them. This plots, for real
-clips of a label and for people generated from its prompt by each model (4 s, seed 0, raw
-decoded motion: the draws of ``scripts/motion_stats_report.py``), the right wrist's
+clips of a label and for people generated from its prompt by each model (4 s, seed 0 or
+``--seed``, raw decoded motion: the draws of ``scripts/motion_stats_report.py``), the right wrist's
 sideways offset from the pelvis in the person's own frame (heading at frame 0) over time,
 one panel per source, and prints each source's medians of the root-relative right-wrist
 speed and of the swings per second (turns after at least 10 cm; ``umf.eval.motion_stats``,
-the statistics the label check uses).
+the statistics the label check uses), and how many people swing at least once a second.
 
     python scripts/wrist_trace.py NAME=MODEL_DIR [NAME=MODEL_DIR ...] --out FILE.png
-        [--corpus out/corpus] [--label wave-right-hand] [--people 6]
+        [--corpus out/corpus] [--label wave-right-hand] [--people 6] [--seed 0]
 """
 
 from __future__ import annotations
@@ -63,23 +63,26 @@ def main() -> None:
     ap.add_argument("--corpus", default="out/corpus")
     ap.add_argument("--label", default="wave-right-hand", choices=sorted(MS.LABELS))
     ap.add_argument("--people", type=int, default=6, help="people per panel")
+    ap.add_argument("--seed", type=int, default=0, help="sampling seed of the 16 people")
     args = ap.parse_args()
     torch.set_num_threads(2)
     real = MS.real_joints_by_label(Corpus.load(args.corpus), labels=[args.label])[args.label]
     real = [j[:121] for j in real if len(j) >= 121]  # 4 s, as generated
     sources = {"real clips": real}
     for spec in args.models:
-        name, path = spec.split("=", 1)
+        name, path = spec.rsplit("=", 1)  # the name may hold "=", a path seldom does
         pipe = UMFPipeline.from_pretrained(path)
-        scenes = pipe([MS.LABELS[args.label][0]] * 16, num_people=1, seconds=4.0, seed=0,
-                      fit=False)  # fmt: skip
+        scenes = pipe([MS.LABELS[args.label][0]] * 16, num_people=1, seconds=4.0,
+                      seed=args.seed, fit=False)  # fmt: skip
         sources[name] = [s.joints[0] for s in scenes]
     names = ["right_wrist_energy", "right_wrist_swings"]
     stats = {k: MS.median_statistics(v, names) for k, v in sources.items()}
     for k, (speed, swings) in stats.items():
+        every = [MS.motion_statistics(j)["right_wrist_swings"] for j in sources[k]]
         print(
             f"{k}: medians over {len(sources[k])} people: right-wrist speed {speed:.2f} m/s, "
-            f"{swings:.2f} swings/s of at least {MS.SWING:.2f} m"
+            f"{swings:.2f} swings/s of at least {MS.SWING:.2f} m; "
+            f"{sum(s >= 1.0 for s in every)} of {len(every)} swing at least once a second"
         )
     traces = {k: [MS.sideways(j) for j in v[: args.people]] for k, v in sources.items()}
     plot(traces, stats, Path(args.out), args.label)

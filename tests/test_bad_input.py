@@ -170,6 +170,12 @@ CASES = [
         "train_pflow.balance_labels must be between 0 and 1",
     ),
     ([*T, "--set", "train_pflow.balance_labels=2"], 1, "balance_labels must be between 0 and 1"),
+    ([*T, "--set", "train_pflow.caption_mix=1.5"], 1, "caption_mix must be between 0 and 1"),
+    (
+        [*T, "--set", "train_pflow.caption_mix_from=[normal]"],
+        1,
+        "train_pflow.caption_mix_from takes key=value pairs",
+    ),
     ([*T, "--set", "train_pflow.labels=[1]"], 1, "train_pflow.labels must be a list of words"),
     ([*T, "--set", "train_pflow.labels=wave"], 1, "train_pflow.labels must be a list"),
     ([*T, "--set", "train_sflow.labels=[wave]"], 1, "train_sflow.labels: only the VAE and P-Flow"),

@@ -607,6 +607,13 @@ def test_caption_mix_from_draws_only_the_matching_clips(corpus, monkeypatch):
     assert len(seen) > 1  # several donors, not one
     with pytest.raises(UMFError, match="caption_mix_from takes key=value pairs"):
         D.SingleMotionDataset(corpus, "train", None, caption_mix=0.5, caption_mix_from=("old",))
+    # no clip has the keys (a corpus without such metadata): an error, not a silent no-op
+    with pytest.raises(UMFError, match=r"caption_mix: no captioned clip .* \['no_such_key'\]"):
+        D.SingleMotionDataset(
+            corpus, "train", None, caption_mix=0.5, caption_mix_within=("no_such_key",)
+        )
+    off = D.SingleMotionDataset(corpus, "train", None, caption_mix_within=("no_such_key",))
+    assert off.caption_mix == 0.0  # without mixing the keys are not needed
 
 
 def test_caption_mix_reaches_the_training_split_only(corpus):

@@ -284,7 +284,7 @@ _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every
 _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
                  "guidance", "fine_guidance"}  # fmt: skip  # >= 0
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
-_FRACTIONS = {"balance_labels"}  # floats in [0, 1]
+_FRACTIONS = {"balance_labels", "caption_mix"}  # floats in [0, 1]
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -305,6 +305,8 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             from umf.text import respell_table
 
             respell_table(value)
+        if name == "caption_mix_from" and any("=" not in v or v.startswith("=") for v in value):
+            raise UMFError(f"{where} takes key=value pairs (e.g. style=normal), got {value!r}")
         return
     if kind.startswith("tuple"):
         if not isinstance(value, tuple | list) or not value:

@@ -470,6 +470,9 @@ class SingleMotionDataset(_EpochDataset):
                 group = self.mix_groups.setdefault(key, [])
                 if not group or group[-1] is not clip:
                     group.append(clip)
+        if caption_mix and not self.mix_groups:  # e.g. a corpus without these metadata
+            raise UMFError(f"caption_mix: no captioned clip of split {split!r} has the metadata "
+                           f"{list(self.mix_within)} and {list(caption_mix_from)}")  # fmt: skip
 
     def __len__(self) -> int:
         return len(self.items)
