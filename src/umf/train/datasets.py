@@ -257,9 +257,10 @@ def extend_joints(joints: np.ndarray, start: int, stop: int, period: int = 0) ->
     return (j[src] + cycles[:, None, None] * travel).astype(j.dtype)
 
 
-def item_rng(seed: int, epoch: int, index: int) -> np.random.Generator:
-    """The generator of one item: a function of (seed, epoch, index) only."""
-    return np.random.default_rng([seed % 2**63, epoch, index])
+def item_rng(seed: int, epoch: int, index: int, stream: int = 0) -> np.random.Generator:
+    """The generator of one item: a function of (seed, epoch, index) only; ``stream`` > 0
+    gives the item an independent extra generator (draws that must not shift the others)."""
+    return np.random.default_rng([seed % 2**63, epoch, index, *([stream] if stream else [])])
 
 
 def _check_frames(min_frames: int, max_frames: int) -> None:
@@ -502,7 +503,7 @@ class SingleMotionDataset(_EpochDataset):
             start, length = crop_window(rng, clip.num_frames - 1, self.min_frames, self.max_frames)
         caption = clip.captions[int(rng.integers(len(clip.captions)))] if clip.captions else ""
         if self.caption_mix:  # its own generator, so every other draw stays as without it
-            mix_rng = np.random.default_rng([self.seed % 2**63, self.epoch, index, 1])
+            mix_rng = item_rng(self.seed, self.epoch, index, stream=1)
             caption = self._mixed_caption(clip, caption, mix_rng)
         f = canonicalize_features(_clip_crop(clip, tf, [person], start, length, period or 0))[0]
         if self.random_placement:
