@@ -2,7 +2,9 @@
 
 Each example is exactly what its `umf generate` command (printed, and listed in the
 README) produces: same prompt, people, duration and seed. Writes
-``docs/images/generated/<name>.png``.
+``docs/images/generated/<name>.png``. Five frames a second apart cannot show a wave's
+swing, so the wave also gets a close strip (``wave_front.png``): the same person seen from
+the front (its heading at frame 0), every 0.2 s from 0.4 s to 1.8 s.
 
     python scripts/readme_examples.py [--model DIR] [--out docs/images/generated]
 """
@@ -27,6 +29,8 @@ EXAMPLES = [
     ("gather", "A person calls and four people walk over to them.", 5, 4.0),
 ]
 FRAMES = 5  # evenly spaced frames per strip
+# (file name, example it shows again, frames): close strips seen from the front
+CLOSE = [("wave_front", "wave", list(range(12, 55, 6)))]
 
 
 def main() -> None:
@@ -36,18 +40,30 @@ def main() -> None:
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
 
+    import math
+
+    from umf.eval.motion_stats import start_facing
     from umf.pipeline import UMFPipeline
     from umf.render import save_still
 
     pipe = UMFPipeline.from_pretrained(args.model)
     args.out.mkdir(parents=True, exist_ok=True)
+    scenes = {}
     for name, prompt, people, seconds in EXAMPLES:
-        scene = pipe(prompt, num_people=people, seconds=seconds, seed=args.seed)[0]
+        scene = scenes[name] = pipe(prompt, num_people=people, seconds=seconds, seed=args.seed)[0]
         t = scene.num_frames
         frames = [round(i * (t - 1) / (FRAMES - 1)) for i in range(FRAMES)]
         path = save_still(scene.joints, args.out / f"{name}.png", frames, caption=prompt)
         print(f'{path}: umf generate "{prompt}" --people {people} --seconds {seconds:g} '
               f"--seed {args.seed} --format gif")  # fmt: skip
+    for name, shown, frames in CLOSE:
+        person = scenes[shown].joints[0]
+        fx, fz = start_facing(person)  # the camera stands where the person looks
+        caption = f"{scenes[shown].text} (seen from the front, every 0.2 s)"
+        azim = math.degrees(math.atan2(fx, fz))
+        path = save_still(person, args.out / f"{name}.png", frames, caption=caption,
+                          azim=azim, elev=10.0, size=(300, 400))  # fmt: skip
+        print(f"{path}: frames {frames[0]}-{frames[-1]} of {shown}.png's person")
 
 
 if __name__ == "__main__":
