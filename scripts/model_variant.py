@@ -50,9 +50,10 @@ def write_variant(src: Path, dst: Path, options: list[str], name: str | None = N
                     shutil.copy2(f, tmp / f.name)
         (tmp / "config.json").write_text(json.dumps(cfg.to_dict(), indent=2))
         fmt = json.loads((src / "format.json").read_text())
-        fmt["variant_of"] = {"name": fmt.get("name"), "options": list(options)}
+        if options:  # a model only named (e.g. a fresh export) is no variant of anything
+            fmt["variant_of"] = {"name": fmt.get("name"), "options": list(options)}
         fmt["name"] = name or dst.name
-        (tmp / "format.json").write_text(json.dumps(fmt, indent=2))
+        (tmp / "format.json").write_text(json.dumps(fmt, indent=2) + "\n")
         UMFPipeline.from_pretrained(tmp)  # the weights must still fit (no d_model changes)
         tmp.rename(dst)
     except BaseException:

@@ -12,6 +12,7 @@ the front (its heading at frame 0), every 0.2 s from 0.4 s to 1.8 s.
 from __future__ import annotations
 
 import argparse
+import math
 from pathlib import Path
 
 EXAMPLES = [
@@ -29,7 +30,7 @@ EXAMPLES = [
     ("gather", "A person calls and four people walk over to them.", 5, 4.0),
 ]
 FRAMES = 5  # evenly spaced frames per strip
-# (file name, example it shows again, frames): close strips seen from the front
+# (file name, example it shows again, frames at 30 fps): close strips seen from the front
 CLOSE = [("wave_front", "wave", list(range(12, 55, 6)))]
 
 
@@ -39,8 +40,6 @@ def main() -> None:
     parser.add_argument("--out", type=Path, default=Path("docs/images/generated"))
     parser.add_argument("--seed", type=int, default=0)
     args = parser.parse_args()
-
-    import math
 
     from umf.eval.motion_stats import start_facing
     from umf.pipeline import UMFPipeline

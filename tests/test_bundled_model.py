@@ -100,26 +100,33 @@ def test_reconstructed_wave_and_bow(pipe):
 
 def test_generated_gestures_follow_the_prompt(pipe):
     """The fast motion-statistics guard (medians over 4 seeds, 4 s): raised hands and a
-    right-hand wave go above the head and the wave swings (the release before
-    umf-small-bandai-20261127c held it still: 0 swings a second at every seed), a bow
-    drops the head (real clips 0.12-0.21 m; that release 0.135), a walk travels at a
-    walking speed (real clips: 0.86-1.45 m/s, 10th-90th percentile), a run faster, a
-    gesture stays nearly in place. A mean pose carried along a path fails the first two;
-    a shaking pelvis the last."""
+    right-hand wave go above the head and the wave swings (median over 8 seeds: 0.76
+    swings a second; the release before umf-small-bandai-20261127c held it still, 0.00 at
+    seven seeds of eight), a bow drops the head (a guard against going back to that
+    release's shallow bows, median 0.135 m, not a realism bound: real clips 0.12-0.21 m),
+    a walk travels at a walking speed (real clips: 0.86-1.45 m/s, 10th-90th percentile), a
+    run faster, a gesture stays nearly in place. A mean pose carried along a path fails
+    the first two; a shaking pelvis the last."""
     from umf.eval.motion_stats import motion_statistics
 
+    def medians(prompt: str, seeds: int = 4) -> dict[str, float]:
+        scenes = [pipe(prompt, num_people=1, seconds=4.0, seed=s)[0] for s in range(seeds)]
+        rows = [motion_statistics(sc.joints[0]) for sc in scenes]
+        return {k: float(np.median([r[k] for r in rows])) for k in rows[0]}
+
     def median(prompt: str, stat: str) -> float:
-        scenes = [pipe(prompt, num_people=1, seconds=4.0, seed=s)[0] for s in range(4)]
-        return float(np.median([motion_statistics(sc.joints[0])[stat] for sc in scenes]))
+        return medians(prompt)[stat]
 
     assert median("A person raises both hands.", "both_wrists_above_head") > 0.1
-    assert median("Someone waves with the right hand.", "right_wrist_above_head") > 0.1
-    assert median("Someone waves with the right hand.", "right_wrist_swings") > 0.3
+    # swings come in steps of 0.25 a second (one turn in 4 s): 8 seeds keep the median steady
+    wave = medians("Someone waves with the right hand.", seeds=8)
+    assert wave["right_wrist_above_head"] > 0.1
+    assert wave["right_wrist_swings"] > 0.3, wave
     assert median("Someone bows politely.", "head_drop") > 0.15
     walk = median("A person walks forward.", "pelvis_speed")
     assert 0.8 < walk < 1.8, walk
     assert median("A person runs forward.", "pelvis_speed") > 1.5 * walk
-    assert median("Someone waves with the right hand.", "pelvis_speed") < 0.5 * walk
+    assert wave["pelvis_speed"] < 0.5 * walk
 
 
 def test_a_gesture_longer_than_its_clips_stands_to_the_end(pipe):
