@@ -605,6 +605,15 @@ def test_caption_mix_from_draws_only_the_matching_clips(corpus, monkeypatch):
                 assert style == "old"
                 seen.add(whose)
     assert len(seen) > 1  # several donors, not one
+    # items of rare labels repeat (balance): a donor still counts once in its group
+    monkeypatch.setitem(clips[0].meta, "content", "rare")
+    monkeypatch.setitem(clips[3].meta, "content", "rare")
+    rep = D.SingleMotionDataset(corpus, "train", None, 20, 60, seed=2, balance=1.0, **mix)
+    assert len(rep.items) > len(ds.items)
+    assert [len(g) for g in rep.mix_groups.values()] == [
+        len({id(c) for c in g}) for g in rep.mix_groups.values()
+    ]
+    assert len(rep.mix_groups[("rare",)]) == 2
     with pytest.raises(UMFError, match="caption_mix_from takes key=value pairs"):
         D.SingleMotionDataset(corpus, "train", None, caption_mix=0.5, caption_mix_from=("old",))
     # no clip has the keys (a corpus without such metadata): an error, not a silent no-op

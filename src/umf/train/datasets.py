@@ -464,13 +464,13 @@ class SingleMotionDataset(_EpochDataset):
         if any(len(pair) != 2 for pair in mix_from):
             raise UMFError(f"caption_mix_from takes key=value pairs, got {list(caption_mix_from)}")
         self.mix_groups: dict[tuple, list[MotionClip]] = {}
+        grouped: set[int] = set()  # each clip once, however often (and wherever) it repeats
         for clip, _, _ in self.items:
             key = self._mix_key(clip)
             donor = all(str(clip.meta.get(k)) == v for k, v in mix_from)
-            if key is not None and clip.captions and donor:
-                group = self.mix_groups.setdefault(key, [])
-                if not group or group[-1] is not clip:
-                    group.append(clip)
+            if key is not None and clip.captions and donor and id(clip) not in grouped:
+                grouped.add(id(clip))
+                self.mix_groups.setdefault(key, []).append(clip)
         if caption_mix and not self.mix_groups:  # e.g. a corpus without these metadata
             raise UMFError(f"caption_mix: no captioned clip of split {split!r} has the metadata "
                            f"{list(self.mix_within)} and {list(caption_mix_from)}")  # fmt: skip
