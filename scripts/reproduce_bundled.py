@@ -6,6 +6,8 @@ in order, with the options those pages and the shipped ``config.json`` record, i
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``:
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
+        [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
+                          # check of the wiring (12.5 min here, the whole chain)
 
 Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again skips
 the finished stages and resumes the training it was in (``umf train --resume``). The
@@ -81,9 +83,22 @@ PFLOW_MIX = dict(**EXTEND, respell_captions=True, caption_mix=0.5, caption_mix_w
                  val_every=500, num_workers=0)  # fmt: skip
 
 
-def stages(work: Path, corpus: Path) -> list[tuple[str, list[list[str]], dict[str, str]]]:
-    """(name, commands, extra environment) of every stage, in order."""
+def stages(
+    work: Path, corpus: Path, max_steps: int | None = None
+) -> list[tuple[str, list[list[str]], dict[str, str]]]:
+    """(name, commands, extra environment) of every stage, in order; ``max_steps`` cuts
+    every training stage short and its flows' latent banks to one pass (the stage's last
+    options, so they win)."""
     py = sys.executable
+    scripts = Path(__file__).resolve().parent
+
+    def cut(*trained: str) -> list[str]:
+        if max_steps is None:
+            return []
+        opts = [f"train_{t}.max_steps={max_steps}" for t in trained]
+        opts += [f"train_{t}.latent_passes=1" for t in trained if t != "vae"]
+        return [a for o in opts for a in ("--set", o)]
+
     here = Path(py).with_name("umf")  # the umf command of this environment
     umf = [str(here) if here.exists() else "umf"]
     c = ["--corpus", str(corpus)]
@@ -92,7 +107,7 @@ def stages(work: Path, corpus: Path) -> list[tuple[str, list[list[str]], dict[st
         out = work / "runs" / run
         resume = ["--resume"] if out.exists() else []
         return [[*umf, "train", stage, *c, "--out", str(out), "--init", str(init),
-                 *options, *resume]]  # fmt: skip
+                 *options, *cut(stage), *resume]]  # fmt: skip
 
     def export(run: str, base: Path, model: Path) -> list[str]:
         return [*umf, "train", "export", "--run", str(work / "runs" / run), "--out", str(model),
@@ -102,9 +117,10 @@ def stages(work: Path, corpus: Path) -> list[tuple[str, list[list[str]], dict[st
     gpu_sets = sets("train_vae", **GPU_VAE)
     for f in ("pflow", "sflow"):
         gpu_sets += sets(f"train_{f}", **GPU_FLOW, latent_passes=GPU_PASSES[f])
-    out = [("gpu", [[py, "scripts/gpu_flows_train.py", "864000", "--vae", *gpu_sets]],
+    gpu_sets += cut("vae", "pflow", "sflow")
+    out = [("gpu", [[py, str(scripts / "gpu_flows_train.py"), "864000", "--vae", *gpu_sets]],
             {"OUT": str(m["gpu"]), "RUNS": str(work / "runs" / "gpu"), "CORPUS": str(corpus)}),
-           ("sampling", [[py, "scripts/model_variant.py", str(m["gpu"]), str(m["sampling"]),
+           ("sampling", [[py, str(scripts / "model_variant.py"), str(m["gpu"]), str(m["sampling"]),
                           *[a for o in SAMPLING for a in ("--set", o)]]], {})]  # fmt: skip
     prev = m["sampling"]
     for run, sigma, steps, val in REACTION_NOISE:
@@ -120,7 +136,7 @@ def stages(work: Path, corpus: Path) -> list[tuple[str, list[list[str]], dict[st
     out.append(("dec", [*dec, export("dec", m["hg"], m["dec"])], {}))
     mix = finetune("pflow", "mix", m["dec"], sets("train_pflow", **PFLOW_MIX))
     out.append(("mix", [*mix, export("mix", m["dec"], m["mix"])], {}))
-    out.append(("name", [[py, "scripts/model_variant.py", str(m["mix"]), str(work / "model"),
+    out.append(("name", [[py, str(scripts / "model_variant.py"), str(m["mix"]), str(work / "model"),
                           "--name", NAME]], {}))  # fmt: skip
     return out
 
@@ -130,11 +146,16 @@ def main() -> None:
     ap.add_argument("--work", type=Path, default=Path.home() / "umf-runs" / "bundled")
     ap.add_argument("--corpus", type=Path, default=Path("out/corpus"))
     ap.add_argument("--dry-run", action="store_true", help="print the commands, run nothing")
+    ap.add_argument("--max-steps", type=int, default=None,
+                    help="cut every training stage to N steps and one latent pass "
+                    "(a check of the wiring)")  # fmt: skip
     args = ap.parse_args()
+    if args.max_steps is not None and args.max_steps < 1:
+        sys.exit("error: --max-steps must be at least 1")
     if not args.dry_run and not (args.corpus / "manifest.json").exists():
         sys.exit(f"error: no corpus at {args.corpus} (make corpus, or umf data prepare)")
     done = args.work / "done"
-    for name, commands, env in stages(args.work, args.corpus):
+    for name, commands, env in stages(args.work, args.corpus, args.max_steps):
         if (done / name).exists():
             print(f"== {name}: done before", flush=True)
             continue
