@@ -12,14 +12,14 @@ in order, with the options those pages and the shipped ``config.json`` record, i
 Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again skips
 the finished stages and resumes the training it was in (``umf train --resume``). The
 first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice) wants a
-GPU (about 10 min on an H200); on this 2-core CPU it would take days. The CPU fine-tunes
+GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
 after it take about 2 h here (1.5 h of them the S-Flow). ``--dry-run`` prints the
 commands and runs nothing.
 
 Not bit-for-bit: the GPU stages ran with TF32 and the code changed between the steps, so
 expect the scores of ``results/umf-small-bandai-20261127c`` within their intervals, not the
-same weights. What the pages leave out and this fills in: the step-3 S-Flow fine-tunes
-after the first validated every 400 steps (the logs and the shipped config say so), and
+same weights. What the pages leave out and this fills in: the S-Flow's reaction-noise
+fine-tunes after the first validated every 400 steps (the logs and the shipped config say so), and
 the sampling options set by hand on the way (guidance 2, ``sflow.pair_steps`` 4, the root
 fusion of ``umf-small-bandai-20261127``) are applied once, after the GPU stage: they do not
 change what is trained.
@@ -28,8 +28,10 @@ change what is trained.
 from __future__ import annotations
 
 import argparse
+import json
 import os
 import shlex
+import shutil
 import subprocess
 import sys
 from pathlib import Path
@@ -50,7 +52,8 @@ def sets(prefix: str, **options: object) -> list[str]:
 
 
 # results/umf-small-bandai-h200-20261126 (the VAE) and -h200-20261126b (both flows)
-GPU_VAE = dict(max_steps=2000, batch_size=128, warmup_steps=300, val_every=1000, ckpt_every=1000)
+GPU_VAE = dict(max_steps=2000, batch_size=128, warmup_steps=300, val_every=1000, ckpt_every=1000,
+               log_every=25)  # fmt: skip
 GPU_FLOW = dict(max_steps=5600, batch_size=512, lr=0.0004, warmup_steps=300, ema_decay=0.999,
                 val_every=400, ckpt_every=400)  # fmt: skip
 GPU_PASSES = {"pflow": 6, "sflow": 8}
@@ -99,8 +102,7 @@ def stages(
         opts += [f"train_{t}.latent_passes=1" for t in trained if t != "vae"]
         return [a for o in opts for a in ("--set", o)]
 
-    here = Path(py).with_name("umf")  # the umf command of this environment
-    umf = [str(here) if here.exists() else "umf"]
+    umf = [py, "-m", "umf"]  # the umf command of this environment
     c = ["--corpus", str(corpus)]
 
     def finetune(stage: str, run: str, init: Path, options: list[str]) -> list[list[str]]:
@@ -118,8 +120,12 @@ def stages(
     for f in ("pflow", "sflow"):
         gpu_sets += sets(f"train_{f}", **GPU_FLOW, latent_passes=GPU_PASSES[f])
     gpu_sets += cut("vae", "pflow", "sflow")
+    workers = str(max(0, min(8, (os.cpu_count() or 1) - 1)))  # loader processes per stage
+    gpu_env = {"OUT": str(m["gpu"]), "RUNS": str(work / "runs" / "gpu"), "CORPUS": str(corpus)}
+    for w in ("VAE_WORKERS", "PFLOW_WORKERS", "SFLOW_WORKERS"):
+        gpu_env[w] = os.environ.get(w, workers)
     out = [("gpu", [[py, str(scripts / "gpu_flows_train.py"), "864000", "--vae", *gpu_sets]],
-            {"OUT": str(m["gpu"]), "RUNS": str(work / "runs" / "gpu"), "CORPUS": str(corpus)}),
+            gpu_env),
            ("sampling", [[py, str(scripts / "model_variant.py"), str(m["gpu"]), str(m["sampling"]),
                           *[a for o in SAMPLING for a in ("--set", o)]]], {})]  # fmt: skip
     prev = m["sampling"]
@@ -155,16 +161,30 @@ def main() -> None:
     if not args.dry_run and not (args.corpus / "manifest.json").exists():
         sys.exit(f"error: no corpus at {args.corpus} (make corpus, or umf data prepare)")
     done = args.work / "done"
+    plan = args.work / "plan.json"  # a cut check and a full run must not share stages
+    want = json.dumps({"max_steps": args.max_steps})
+    if not args.dry_run:
+        if plan.exists() and plan.read_text() != want:
+            sys.exit(f"error: {args.work} holds a run with {plan.read_text()}, not {want}; "
+                     "use another --work")  # fmt: skip
+        args.work.mkdir(parents=True, exist_ok=True)
+        plan.write_text(want)
     for name, commands, env in stages(args.work, args.corpus, args.max_steps):
         if (done / name).exists():
             print(f"== {name}: done before", flush=True)
             continue
         print(f"== {name}", flush=True)
+        variant = "model_variant.py" in commands[0][1]
+        if variant and not args.dry_run and Path(commands[0][3]).exists():
+            shutil.rmtree(commands[0][3])  # written before a kill: model_variant refuses it
         for cmd in commands:
             print("   " + " ".join(f"{k}={v}" for k, v in env.items()) + " " * bool(env)
                   + shlex.join(cmd), flush=True)  # fmt: skip
             if not args.dry_run:
-                rc = subprocess.run(cmd, env={**os.environ, **env}).returncode
+                try:
+                    rc = subprocess.run(cmd, env={**os.environ, **env}).returncode
+                except OSError as e:
+                    sys.exit(f"error: stage {name}: cannot run {cmd[0]}: {e}")
                 if rc:
                     sys.exit(f"error: stage {name} failed (exit {rc}); run again to resume")
         if not args.dry_run:

@@ -37,19 +37,73 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
                 cfg = set_option(cfg, command[i + 1])
     got = json.loads(json.dumps(cfg.to_dict()))  # tuples as lists, as in the file
     want = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "config.json").read_text())
-    # training fills text.respell from the corpus; logging cadence changes no weight
+    # training fills text.respell from the corpus
     for c in (got, want):
         c["text"].pop("respell")
-        c["train_vae"].pop("log_every")
     assert got == want
-    # and the chain is wired: every fine-tune starts from the model the stage before wrote
-    inits = {n: c[0][c[0].index("--init") + 1] for n, c in stages.items() if "--init" in c[0]}
-    assert inits["rn0.5"] == str(tmp_path / "models" / "sampling")
-    assert inits["hg"] == inits["dec"] == str(tmp_path / "models" / "rn0.125d")
-    assert inits["mix"] == str(tmp_path / "models" / "dec")
-    assert stages["dec"][1][-1] == str(tmp_path / "models" / "hg")  # the P-Flow of hg
+    # and the chain is wired: each fine-tune starts from, and exports over, the model the
+    # documented step started from; the last stage names the caption-mixing model
+    models = tmp_path / "models"
+    wiring = {"rn0.5": ("sampling", "sampling"), "rn0.5b": ("rn0.5", "rn0.5"),
+              "rn0.25c": ("rn0.5b", "rn0.5b"), "rn0.125d": ("rn0.25c", "rn0.25c"),
+              "hg": ("rn0.125d", "rn0.125d"), "dec": ("rn0.125d", "hg"),
+              "mix": ("dec", "dec")}  # fmt: skip
+    for name, (init, base) in wiring.items():
+        train, export = stages[name]
+        assert train[train.index("--init") + 1] == str(models / init), name
+        assert export[export.index("--base") + 1] == str(models / base), name
+        assert export[export.index("--out") + 1] == str(models / name), name
+    assert stages["sampling"][0][2:4] == [str(models / "gpu"), str(models / "sampling")]
+    assert stages["name"][0][2:4] == [str(models / "mix"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
+
+
+def _sets(command: list[str]) -> list[str]:
+    return [command[i + 1] for i, a in enumerate(command) if a == "--set"]
+
+
+def test_stages_the_final_config_overwrites_keep_their_documented_options(tmp_path):
+    """Options a later stage overwrites never reach the shipped config: pinned here as the
+    results pages give them (h200-20261126, h200-20261126b, flows-long-h200-20261126,
+    20261127b)."""
+    stages = {n: c for n, c, _ in _script().stages(tmp_path, Path("out/corpus"))}
+    gpu = _sets(stages["gpu"][0])
+    for opt in ("train_vae.max_steps=2000", "train_vae.batch_size=128",
+                "train_vae.warmup_steps=300", "train_pflow.max_steps=5600",
+                "train_sflow.max_steps=5600", "train_pflow.batch_size=512",
+                "train_sflow.batch_size=512", "train_pflow.lr=0.0004", "train_sflow.lr=0.0004",
+                "train_pflow.ema_decay=0.999", "train_sflow.ema_decay=0.999",
+                "train_pflow.latent_passes=6", "train_sflow.latent_passes=8"):  # fmt: skip
+        assert opt in gpu, opt
+    assert _sets(stages["rn0.5"][0]) == [
+        "sflow.reaction_noise=0.5", "train_sflow.lr=0.0001", "train_sflow.warmup_steps=20",
+        "train_sflow.batch_size=128", "train_sflow.latent_passes=2", "train_sflow.ema_decay=0.99",
+        "train_sflow.ckpt_every=200", "train_sflow.num_workers=0", "train_sflow.max_steps=800",
+        "train_sflow.val_every=200",
+    ]  # fmt: skip
+    sigmas = [_sets(stages[n][0])[0] for n in ("rn0.5b", "rn0.25c", "rn0.125d")]
+    assert sigmas == ["sflow.reaction_noise=0.5", "sflow.reaction_noise=0.25",
+                      "sflow.reaction_noise=0.125"]  # fmt: skip
+    assert "train_sflow.max_steps=1600" in _sets(stages["rn0.5b"][0])
+    assert _sets(stages["hg"][0]) == [
+        "train_pflow.hold_rest=true", "train_pflow.repeat_gait=true",
+        "train_pflow.respell_captions=true", "train_pflow.lr=0.0001",
+        "train_pflow.warmup_steps=20", "train_pflow.max_steps=1000", "train_pflow.batch_size=128",
+        "train_pflow.ema_decay=0.99", "train_pflow.latent_passes=4", "train_pflow.ckpt_every=250",
+        "train_pflow.val_every=500", "train_pflow.num_workers=0",
+    ]  # fmt: skip
+    # --max-steps cuts every training stage last, so the cut wins
+    cut = {n: c for n, c, _ in _script().stages(tmp_path, Path("out/corpus"), max_steps=3)}
+    trained = {"gpu": ("vae", "pflow", "sflow"), "hg": ("pflow",), "dec": ("vae",),
+               "mix": ("pflow",), **{n: ("sflow",) for n in ("rn0.5", "rn0.5b", "rn0.25c",
+                                                            "rn0.125d")}}  # fmt: skip
+    for name, what in trained.items():
+        last = {o.split("=")[0]: o.split("=")[1] for o in _sets(cut[name][0])}  # last one wins
+        for stage in what:
+            assert last[f"train_{stage}.max_steps"] == "3", name
+            if stage != "vae":
+                assert last[f"train_{stage}.latent_passes"] == "1", name
 
 
 def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
@@ -62,7 +116,8 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
                      "mix", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
-        [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere")],
+        [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
+         str(tmp_path / "w2")],
         capture_output=True, text=True, cwd=ROOT,
     )  # fmt: skip
     assert missing.returncode != 0 and "no corpus at" in missing.stderr
