@@ -7,7 +7,7 @@ in order, with the options those pages and the shipped ``config.json`` record, i
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
-                          # check of the wiring (12.5 min here, the whole chain)
+                          # check of the wiring (the whole chain: 7 min here alone)
 
 Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again skips
 the finished stages and resumes the training it was in (``umf train --resume``). The
