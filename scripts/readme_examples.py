@@ -30,7 +30,7 @@ EXAMPLES = [
     ("gather", "A person calls and four people walk over to them.", 5, 4.0),
 ]
 FRAMES = 5  # evenly spaced frames per strip
-# (file name, example it shows again, frames at 30 fps): close strips seen from the front
+# (file name, example it shows again, frames): close strips seen from the front
 CLOSE = [("wave_front", "wave", list(range(12, 55, 6)))]
 
 
@@ -58,7 +58,8 @@ def main() -> None:
     for name, shown, frames in CLOSE:
         person = scenes[shown].joints[0]
         fx, fz = start_facing(person)  # the camera stands where the person looks
-        caption = f"{scenes[shown].text} (seen from the front, every 0.2 s)"
+        step = (frames[1] - frames[0]) / scenes[shown].fps
+        caption = f"{scenes[shown].text} (seen from the front, every {step:g} s)"
         azim = math.degrees(math.atan2(fx, fz))
         path = save_still(person, args.out / f"{name}.png", frames, caption=caption,
                           azim=azim, elev=10.0, size=(300, 400))  # fmt: skip

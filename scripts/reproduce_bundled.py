@@ -35,6 +35,7 @@ import shutil
 import subprocess
 import sys
 from pathlib import Path
+from typing import NamedTuple
 
 NAME = "umf-small-bandai-20261127c"
 
@@ -86,10 +87,15 @@ PFLOW_MIX = dict(**EXTEND, respell_captions=True, caption_mix=0.5, caption_mix_w
                  val_every=500, num_workers=0)  # fmt: skip
 
 
-def stages(
-    work: Path, corpus: Path, max_steps: int | None = None
-) -> list[tuple[str, list[list[str]], dict[str, str]]]:
-    """(name, commands, extra environment) of every stage, in order; ``max_steps`` cuts
+class Stage(NamedTuple):
+    name: str
+    commands: list[list[str]]
+    env: dict[str, str]
+    writes: Path | None = None  # a model written whole: one left by a kill is removed first
+
+
+def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage]:
+    """Every stage, in order; ``max_steps`` cuts
     every training stage short and its flows' latent banks to one pass (the stage's last
     options, so they win)."""
     py = sys.executable
@@ -124,26 +130,30 @@ def stages(
     gpu_env = {"OUT": str(m["gpu"]), "RUNS": str(work / "runs" / "gpu"), "CORPUS": str(corpus)}
     for w in ("VAE_WORKERS", "PFLOW_WORKERS", "SFLOW_WORKERS"):
         gpu_env[w] = os.environ.get(w, workers)
-    out = [("gpu", [[py, str(scripts / "gpu_flows_train.py"), "864000", "--vae", *gpu_sets]],
-            gpu_env),
-           ("sampling", [[py, str(scripts / "model_variant.py"), str(m["gpu"]), str(m["sampling"]),
-                          *[a for o in SAMPLING for a in ("--set", o)]]], {})]  # fmt: skip
+
+    def variant(name: str, src: Path, dst: Path, *options: str) -> Stage:
+        command = [py, str(scripts / "model_variant.py"), str(src), str(dst), *options]
+        return Stage(name, [command], {}, writes=dst)  # model_variant refuses an existing dst
+
+    out = [Stage("gpu", [[py, str(scripts / "gpu_flows_train.py"), "864000", "--vae",
+                          *gpu_sets]], gpu_env),
+           variant("sampling", m["gpu"], m["sampling"],
+                   *[a for o in SAMPLING for a in ("--set", o)])]  # fmt: skip
     prev = m["sampling"]
     for run, sigma, steps, val in REACTION_NOISE:
         model = work / "models" / run
         opts = sets("sflow", reaction_noise=sigma)
         opts += sets("train_sflow", **SFLOW_FT, max_steps=steps, val_every=val)
-        out.append((run, [*finetune("sflow", run, prev, opts), export(run, prev, model)], {}))
+        out.append(Stage(run, [*finetune("sflow", run, prev, opts), export(run, prev, model)], {}))
         prev = model
     m["sflow"] = prev  # the S-Flow's last fine-tune
     hg = finetune("pflow", "hg", m["sflow"], sets("train_pflow", **PFLOW_EXTEND))
-    out.append(("hg", [*hg, export("hg", m["sflow"], m["hg"])], {}))
+    out.append(Stage("hg", [*hg, export("hg", m["sflow"], m["hg"])], {}))
     dec = finetune("vae", "dec", m["sflow"], sets("train_vae", **DECODER))
-    out.append(("dec", [*dec, export("dec", m["hg"], m["dec"])], {}))
+    out.append(Stage("dec", [*dec, export("dec", m["hg"], m["dec"])], {}))
     mix = finetune("pflow", "mix", m["dec"], sets("train_pflow", **PFLOW_MIX))
-    out.append(("mix", [*mix, export("mix", m["dec"], m["mix"])], {}))
-    out.append(("name", [[py, str(scripts / "model_variant.py"), str(m["mix"]), str(work / "model"),
-                          "--name", NAME]], {}))  # fmt: skip
+    out.append(Stage("mix", [*mix, export("mix", m["dec"], m["mix"])], {}))
+    out.append(variant("name", m["mix"], work / "model", "--name", NAME))
     return out
 
 
@@ -169,14 +179,13 @@ def main() -> None:
                      "use another --work")  # fmt: skip
         args.work.mkdir(parents=True, exist_ok=True)
         plan.write_text(want)
-    for name, commands, env in stages(args.work, args.corpus, args.max_steps):
+    for name, commands, env, writes in stages(args.work, args.corpus, args.max_steps):
         if (done / name).exists():
             print(f"== {name}: done before", flush=True)
             continue
         print(f"== {name}", flush=True)
-        variant = "model_variant.py" in commands[0][1]
-        if variant and not args.dry_run and Path(commands[0][3]).exists():
-            shutil.rmtree(commands[0][3])  # written before a kill: model_variant refuses it
+        if writes is not None and writes.exists() and not args.dry_run:
+            shutil.rmtree(writes)
         for cmd in commands:
             print("   " + " ".join(f"{k}={v}" for k, v in env.items()) + " " * bool(env)
                   + shlex.join(cmd), flush=True)  # fmt: skip

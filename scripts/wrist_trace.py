@@ -76,9 +76,10 @@ def main() -> None:
                       seed=args.seed, fit=False)  # fmt: skip
         sources[name] = [s.joints[0] for s in scenes]
     names = ["right_wrist_energy", "right_wrist_swings"]
-    stats = {k: MS.median_statistics(v, names) for k, v in sources.items()}
+    rows = {k: [MS.motion_statistics(j) for j in v] for k, v in sources.items()}  # once each
+    stats = {k: MS.medians(v, names) for k, v in rows.items()}
     for k, (speed, swings) in stats.items():
-        every = [MS.motion_statistics(j)["right_wrist_swings"] for j in sources[k]]
+        every = [r["right_wrist_swings"] for r in rows[k]]
         print(
             f"{k}: medians over {len(sources[k])} people: right-wrist speed {speed:.2f} m/s, "
             f"{swings:.2f} swings/s of at least {MS.SWING:.2f} m; "

@@ -24,7 +24,7 @@ def _script():
 
 def test_the_stages_rebuild_the_shipped_config(tmp_path):
     rb = _script()
-    stages = {name: commands for name, commands, _ in rb.stages(tmp_path, Path("out/corpus"))}
+    stages = {st.name: st.commands for st in rb.stages(tmp_path, Path("out/corpus"))}
     # each stage's model is the next one's --init (or source), so configs carry over; the
     # P-Flow fine-tune "hg" is not in the chain of configs: the decoder stage starts from the
     # S-Flow's model and takes hg's P-Flow as its export --base (as the release did)
@@ -54,6 +54,9 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         assert export[export.index("--base") + 1] == str(models / base), name
         assert export[export.index("--out") + 1] == str(models / name), name
     assert stages["sampling"][0][2:4] == [str(models / "gpu"), str(models / "sampling")]
+    # the model_variant stages, which refuse an existing destination, replace one left by a kill
+    writes = {st.name: st.writes for st in rb.stages(tmp_path, Path("out/corpus")) if st.writes}
+    assert writes == {"sampling": models / "sampling", "name": tmp_path / "model"}
     assert stages["name"][0][2:4] == [str(models / "mix"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
@@ -67,7 +70,7 @@ def test_stages_the_final_config_overwrites_keep_their_documented_options(tmp_pa
     """Options a later stage overwrites never reach the shipped config: pinned here as the
     results pages give them (h200-20261126, h200-20261126b, flows-long-h200-20261126,
     20261127b)."""
-    stages = {n: c for n, c, _ in _script().stages(tmp_path, Path("out/corpus"))}
+    stages = {st.name: st.commands for st in _script().stages(tmp_path, Path("out/corpus"))}
     gpu = _sets(stages["gpu"][0])
     for opt in ("train_vae.max_steps=2000", "train_vae.batch_size=128",
                 "train_vae.warmup_steps=300", "train_pflow.max_steps=5600",
@@ -94,7 +97,7 @@ def test_stages_the_final_config_overwrites_keep_their_documented_options(tmp_pa
         "train_pflow.val_every=500", "train_pflow.num_workers=0",
     ]  # fmt: skip
     # --max-steps cuts every training stage last, so the cut wins
-    cut = {n: c for n, c, _ in _script().stages(tmp_path, Path("out/corpus"), max_steps=3)}
+    cut = {st.name: st.commands for st in _script().stages(tmp_path, Path("out/corpus"), 3)}
     trained = {"gpu": ("vae", "pflow", "sflow"), "hg": ("pflow",), "dec": ("vae",),
                "mix": ("pflow",), **{n: ("sflow",) for n in ("rn0.5", "rn0.5b", "rn0.25c",
                                                             "rn0.125d")}}  # fmt: skip

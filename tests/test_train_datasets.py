@@ -614,8 +614,9 @@ def test_caption_mix_from_draws_only_the_matching_clips(corpus, monkeypatch):
         len({id(c) for c in g}) for g in rep.mix_groups.values()
     ]
     assert len(rep.mix_groups[("rare",)]) == 2
-    with pytest.raises(UMFError, match="caption_mix_from takes key=value pairs"):
-        D.SingleMotionDataset(corpus, "train", None, caption_mix=0.5, caption_mix_from=("old",))
+    for bad in (("old",), ("=old",)):  # the same reading as the config check's
+        with pytest.raises(UMFError, match="caption_mix_from takes key=value pairs"):
+            D.SingleMotionDataset(corpus, "train", None, caption_mix=0.5, caption_mix_from=bad)
     # no clip has the keys (a corpus without such metadata): an error, not a silent no-op
     with pytest.raises(UMFError, match=r"caption_mix: no captioned clip .* \['no_such_key'\]"):
         D.SingleMotionDataset(

@@ -305,8 +305,10 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             from umf.text import respell_table
 
             respell_table(value)
-        if name == "caption_mix_from" and any("=" not in v or v.startswith("=") for v in value):
-            raise UMFError(f"{where} takes key=value pairs (e.g. style=normal), got {value!r}")
+        if name == "caption_mix_from":
+            from umf.train.datasets import metadata_pairs
+
+            metadata_pairs(value, where)
         return
     if kind.startswith("tuple"):
         if not isinstance(value, tuple | list) or not value:

@@ -188,8 +188,13 @@ def few_real_clips(rows: Sequence[LabelCheck], least: int = FEW_REAL) -> dict[st
 def median_statistics(people: Sequence[Array], stats: Sequence[str],
                       fps: float = 30.0) -> list[float]:  # fmt: skip
     """Median over people (each (T, 22, 3) joints) of each named statistic."""
-    values = [motion_statistics(j, fps) for j in people]
-    return [float(np.median([v[s] for v in values])) for s in stats]
+    return medians([motion_statistics(j, fps) for j in people], stats)
+
+
+def medians(rows: Sequence[dict[str, float]], stats: Sequence[str]) -> list[float]:
+    """Median over rows of :func:`motion_statistics` of each named statistic (for callers
+    that also need the rows themselves)."""
+    return [float(np.median([row[s] for row in rows])) for s in stats]
 
 
 def real_clips_by_label(corpus, splits: Sequence[str] = ("train", "val", "test"),

@@ -263,6 +263,15 @@ def item_rng(seed: int, epoch: int, index: int, stream: int = 0) -> np.random.Ge
     return np.random.default_rng([seed % 2**63, epoch, index, *([stream] if stream else [])])
 
 
+def metadata_pairs(values: Sequence[str], where: str = "caption_mix_from") -> list[list[str]]:
+    """``["style=normal", ...]`` as [key, value] pairs; a one-line error for anything else
+    (the config check and the dataset both read the option through this)."""
+    pairs = [v.split("=", 1) for v in values]
+    if any(len(pair) != 2 or not pair[0] for pair in pairs):
+        raise UMFError(f"{where} takes key=value pairs (e.g. style=normal), got {list(values)}")
+    return pairs
+
+
 def _check_frames(min_frames: int, max_frames: int) -> None:
     if not 1 <= min_frames <= max_frames:
         raise UMFError(f"need 1 <= min_frames <= max_frames, got {min_frames}, {max_frames}")
@@ -460,9 +469,7 @@ class SingleMotionDataset(_EpochDataset):
             ]
         # the captioned clips of each group (content label, style ...), for caption_mix
         self.mix_within = tuple(caption_mix_within)
-        mix_from = [pair.split("=", 1) for pair in caption_mix_from]
-        if any(len(pair) != 2 for pair in mix_from):
-            raise UMFError(f"caption_mix_from takes key=value pairs, got {list(caption_mix_from)}")
+        mix_from = metadata_pairs(caption_mix_from)
         self.mix_groups: dict[tuple, list[MotionClip]] = {}
         grouped: set[int] = set()  # each clip once, however often (and wherever) it repeats
         for clip, _, _ in self.items:
@@ -486,8 +493,7 @@ class SingleMotionDataset(_EpochDataset):
     def _mixed_caption(self, clip: MotionClip, caption: str, rng: np.random.Generator) -> str:
         """With chance ``caption_mix``, a caption of a random clip of the same group (the
         clip itself included; clips without the group's keys keep their own)."""
-        key = self._mix_key(clip)
-        group = self.mix_groups.get(key, []) if key is not None else []
+        group = self.mix_groups.get(self._mix_key(clip), [])  # no key: no group
         if not group or rng.random() >= self.caption_mix:
             return caption
         other = group[int(rng.integers(len(group)))]
