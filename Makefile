@@ -48,9 +48,19 @@ test-slow: $(STAMP)
 bench: $(STAMP)
 	$(BIN)/python scripts/benchmark.py --out results/benchmark.json
 
-# The full corpus from ../shared/data/bandai (or BANDAI=...).
+# The full corpus: Bandai from ../shared/data/bandai (or BANDAI=...), and where ../shared is
+# present (or MOCAP_DATA=...) the real two-person takes (CMU salsa, CMU handshake) and the
+# DeepMimic actions, unpacked into $(OUT)/mocap/ beside their captions from data/mocap/.
+MOCAP_DATA ?= ../shared/data
+MOCAP_LIBS := $(foreach d,cmu-salsa cmu-handshake deepmimic,$(if $(wildcard $(MOCAP_DATA)/$(d)/$(d).tar.xz),$(d)))
 corpus: $(STAMP)
-	$(BIN)/umf data prepare --bandai $(BANDAI) --out $(OUT)/corpus
+	@for d in $(MOCAP_LIBS); do \
+		mkdir -p $(OUT)/mocap && tar xJf $(MOCAP_DATA)/$$d/$$d.tar.xz -C $(OUT)/mocap && \
+		cp data/mocap/$$d/* $(OUT)/mocap/$$d/ && cp $(MOCAP_DATA)/$$d/README.md $(OUT)/mocap/$$d/SOURCE-README.md; \
+		cp $(MOCAP_DATA)/$$d/LICENSE* $(OUT)/mocap/$$d/ 2>/dev/null || true; \
+	done
+	$(BIN)/umf data prepare --bandai $(BANDAI) $(foreach d,$(MOCAP_LIBS),--mocap $(OUT)/mocap/$(d)) \
+		--out $(OUT)/corpus
 
 lint: $(STAMP)
 	$(BIN)/ruff check src tests

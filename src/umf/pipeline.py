@@ -80,6 +80,7 @@ class UMFPipeline:
         self.normalizer = normalizer
         self.name = name
         self.device = torch.device("cpu")
+        self.vocabulary = None  # what the model was trained on (umf.coverage), when it says
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -144,6 +145,9 @@ class UMFPipeline:
         check_model_weights(modules, ck.normalizer, path)
         pipe.normalizer = ck.normalizer
         pipe.name = str(info.get("name") or path.name)
+        from umf.coverage import Vocabulary
+
+        pipe.vocabulary = Vocabulary.load(path)
         for m in (pipe.vae, pipe.pflow, pipe.sflow):
             m.float().eval()
         return pipe
@@ -155,8 +159,22 @@ class UMFPipeline:
         from umf.checkpoint import save_checkpoint
 
         modules = {"vae": self.vae, "pflow": self.pflow, "sflow": self.sflow}
-        return save_checkpoint(path, modules, config=self.config.to_dict(),
-                               normalizer=self.normalizer, name=name or self.name)  # fmt: skip
+        out = save_checkpoint(path, modules, config=self.config.to_dict(),
+                              normalizer=self.normalizer, name=name or self.name)  # fmt: skip
+        if self.vocabulary is not None:
+            self.vocabulary.save(out)
+        return out
+
+    def coverage(self, prompts: Sequence[str]) -> list[dict | None]:
+        """How well each prompt is covered by what the model was trained on
+        (:mod:`umf.coverage`): ``{"score", "known", "nearest"}``, or None for a model that
+        carries no vocabulary."""
+        if self.vocabulary is None:
+            return [None] * len(prompts)
+        distinct = sorted(set(prompts))
+        scored = dict(zip(distinct, self.vocabulary.score(distinct, self.text_encoder),
+                          strict=True))  # fmt: skip
+        return [scored[p] for p in prompts]
 
     def to(self, device: str | torch.device) -> UMFPipeline:
         self.device = torch.device(device)
@@ -231,11 +249,15 @@ class UMFPipeline:
             actor = check_actor(actor, self.config.fps, self.config.vae.max_frames)
             frames = actor.shape[0] - 1
         seed = fresh_seed() if req.seed is None else req.seed
+        covered = dict(zip(req.prompts, self.coverage(req.prompts), strict=True))
         scenes: list[Scene] = []
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
             indices = [req.sample_indices[i] for i in part]
-            scenes += self._sample(texts, indices, req, seed, actor, separate, anchor, fit)
+            for scene in self._sample(texts, indices, req, seed, actor, separate, anchor, fit):
+                if covered[scene.text] is not None:
+                    scene.meta["coverage"] = covered[scene.text]
+                scenes.append(scene)
         return scenes
 
     def _sample(

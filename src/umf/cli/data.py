@@ -22,6 +22,10 @@ def prepare(
         None, help="HumanML3D root (new_joint_vecs/, texts/...)."
     ),
     interhuman: Path | None = typer.Option(None, help="InterHuman root (motions_processed/...)."),
+    mocap: list[Path] = typer.Option(
+        [], "--mocap", help="A folder of BVH / DeepMimic files, with optional captions.csv, "
+        "takes.csv and skeleton.json (repeatable; docs/data.md)."
+    ),
     seed: int = typer.Option(1234, help="Seed of the split-independent scene composer."),
     train_scenes: int = typer.Option(3000, help="Two-person scenes composed from train clips."),
     val_scenes: int = typer.Option(200, help="Two-person scenes from val clips."),
@@ -30,13 +34,14 @@ def prepare(
     progress: bool = typer.Option(True, help="Show progress bars."),
 ) -> None:
     """Convert real data to the unified representation and compose multi-person scenes."""
-    from umf.data.corpus import PrepareConfig, prepare_corpus
+    from umf.data.corpus import PrepareConfig, mocap_sources, prepare_corpus
 
     sources = {
         k: v
         for k, v in {"bandai": bandai, "humanml3d": humanml3d, "interhuman": interhuman}.items()
         if v is not None
     }
+    sources.update(mocap_sources(mocap))
     cfg = PrepareConfig(
         seed=seed, train_scenes=train_scenes, val_scenes=val_scenes,
         test_scenes=test_scenes, test_groups=test_groups,

@@ -77,6 +77,16 @@ def peek_config(model: Path | None):
     return config
 
 
+def warn_unknown(pipe, prompts: list[str]) -> None:
+    """One warning line on stderr per distinct prompt the model was not trained for."""
+    from umf.coverage import warning_line
+
+    seen = list(dict.fromkeys(prompts))
+    for prompt, cov in zip(seen, pipe.coverage(seen), strict=True):
+        if cov is not None and not cov["known"]:
+            typer.echo(warning_line(prompt, cov), err=True)
+
+
 def write_scene(scene, stem: Path, wanted: list[str]) -> list[Path]:
     """Every requested file of one scene, named ``stem.*`` (BVH: one per person), all
     written together (:mod:`umf.writer`)."""
@@ -141,6 +151,7 @@ def generate(
         check_for_model(req, config)
     pipe = load_pipeline(model)
     frames = check_for_model(req, pipe.config)
+    warn_unknown(pipe, texts)
     clean_stale(out)
     shown = []
     for part in chunks(len(jobs), chunk_size(req.num_people, frames)):
@@ -219,6 +230,7 @@ def react(
         end = start + most / FPS
         typer.echo(f"note: the actor motion is longer than {most / FPS:.1f} s; using "
                    f"{start:.1f}-{end:.1f} s (--start/--seconds choose)")  # fmt: skip
+    warn_unknown(pipe, [prompt])
     clean_stale(out)
     for part in chunks(batch, chunk_size(req.num_people, joints.shape[0])):
         scenes = pipe([prompt] * len(part), num_people=req.num_people, seed=req.seed,

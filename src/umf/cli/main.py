@@ -10,6 +10,7 @@ from umf import __version__
 from umf.cli.data import app as data_app
 from umf.cli.eval import evaluate
 from umf.cli.generate import generate, react
+from umf.cli.info import info
 from umf.cli.serve import serve, view
 from umf.cli.train import app as train_app
 from umf.errors import UMFError
@@ -33,6 +34,7 @@ app.command("react")(react)
 app.command("eval")(evaluate)
 app.command("serve")(serve)
 app.command("view")(view)
+app.command("info")(info)
 
 
 def _version(value: bool) -> None:

@@ -97,6 +97,48 @@ def all_stages(
     typer.echo(f"model written to {path}")
 
 
+@app.command("finetune")
+def finetune_command(
+    from_: Path = typer.Option(..., "--from", help="The model to start from (a model "
+                               "directory; 'bundled' for the bundled model)."),
+    corpus: Path = CORPUS, out: Path = RUN, set_: list[str] = SET,
+    stages: str = typer.Option("vae,pflow,sflow", help="Stages to fine-tune (the others "
+                               "are the model's)."),
+    accelerator: str = ACCEL, devices: str = DEVICES, num_nodes: int = NODES,
+    strategy: str = STRATEGY, precision: str = PRECISION, resume: bool = RESUME,
+    progress: bool = PROGRESS, tensorboard: bool = TB,
+) -> None:  # fmt: skip
+    """Teach a released model a new library: fine-tune its stages on a corpus that holds
+    the new clips beside the model's own data (replay), then export RUN/model."""
+    from umf.pipeline import default_model_dir
+    from umf.train.run import finetune
+
+    model = default_model_dir() if str(from_) == "bundled" else from_
+    launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard)
+    path = finetune(model, corpus, out, set_, launch, resume=resume,
+                    stages=[s.strip() for s in stages.split(",") if s.strip()], log=typer.echo)
+    typer.echo(f"model written to {path}")
+
+
+@app.command("vocabulary")
+def vocabulary(
+    model: Path = typer.Option(..., "--model", help="Model directory to add it to."),
+    corpus: Path = CORPUS,
+    threshold: float | None = typer.Option(None, help="Coverage below which a prompt is "
+                                           "unknown (default: the calibrated one)."),
+) -> None:  # fmt: skip
+    """Write the model's training vocabulary (captions, actions, styles, relations and their
+    text embeddings) from the corpus it was trained on, for coverage warnings."""
+    from umf.coverage import THRESHOLD
+    from umf.train.run import write_vocabulary
+    from umf.validation import check_float
+
+    t = THRESHOLD if threshold is None else check_float("--threshold", threshold, -1.0, 1.0)
+    vocab = write_vocabulary(model, corpus, t)
+    typer.echo(f"vocabulary of {len(vocab.phrases)} captions, {len(vocab.actions)} actions "
+               f"written to {model}")  # fmt: skip
+
+
 @app.command("evaluator")
 def evaluator(
     corpus: Path = CORPUS, out: Path = RUN, family: str | None = FAMILY,

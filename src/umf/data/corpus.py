@@ -17,6 +17,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import re
 import time
 import warnings
 from collections.abc import Callable, Iterable, Iterator
@@ -44,7 +45,7 @@ from umf.rotations import matrix_to_6d
 
 FORMAT = "umf-corpus"
 FORMAT_VERSION = 1
-CACHE_VERSION = 2  # bump when the per-source conversion changes
+CACHE_VERSION = 3  # bump when the per-source conversion changes
 SPLITS = ("train", "val", "test")
 BANDAI_ATTRIBUTION = (
     "Bandai-Namco-Research-Motiondataset, (c) 2022 Bandai Namco Research Inc., CC BY-NC 4.0; "
@@ -229,11 +230,38 @@ def _interhuman_loader(path: Path, problems: list[tuple[str, str]]) -> Iterator[
     return load_interhuman(path, problems=problems)
 
 
+def _mocap_loader(path: Path, problems: list[tuple[str, str]]) -> Iterator[MotionClip]:
+    from umf.data.mocap import load_mocap
+
+    return load_mocap(path, problems)
+
+
 LOADERS = {
     "bandai": _bandai_loader,
     "humanml3d": _humanml3d_loader,
     "interhuman": _interhuman_loader,
+    "mocap": _mocap_loader,
 }
+
+
+def loader_of(name: str) -> Callable[[Path, list[tuple[str, str]]], Iterable[MotionClip]]:
+    """The reader of a source: its name, or ``mocap-<folder>`` for a ``--mocap`` folder."""
+    key = "mocap" if name == "mocap" or name.startswith("mocap-") else name
+    if key not in LOADERS:
+        raise UMFError(f"unknown source {name!r}")
+    return LOADERS[key]
+
+
+def mocap_sources(folders: Iterable[str | Path]) -> dict[str, Path]:
+    """``--mocap`` folders as named sources (``mocap-<folder name>``, numbered if repeated)."""
+    out: dict[str, Path] = {}
+    for folder in folders:
+        base = f"mocap-{re.sub(r'[^A-Za-z0-9_.-]+', '_', Path(folder).resolve().name) or 'dir'}"
+        name, n = base, 2
+        while name in out:
+            name, n = f"{base}-{n}", n + 1
+        out[name] = Path(folder)
+    return out
 
 
 # --------------------------------------------------------------------- corpus
@@ -393,10 +421,9 @@ def prepare_corpus(
     config = config or PrepareConfig()
     out = Path(out)
     if not sources:
-        raise UMFError("no data source given (use --bandai, --humanml3d or --interhuman)")
+        raise UMFError("no data source given (use --bandai, --mocap, --humanml3d or --interhuman)")
     for name, path in sources.items():
-        if name not in LOADERS:
-            raise UMFError(f"unknown source {name!r}")
+        loader_of(name)
         if not Path(path).exists():
             raise UMFError(f"{name} data not found: {path}")
     check_prepare_config(config)
@@ -410,11 +437,15 @@ def prepare_corpus(
     clips: list[MotionClip] = []
     source_info = []
     for name, path in sources.items():
-        got, reused = load_source(name, Path(path), LOADERS[name], cache_dir, problems, progress)
+        got, reused = load_source(name, Path(path), loader_of(name), cache_dir, problems, progress)
         clips.extend(got)
-        source_info.append(
-            {"name": name, "path": str(path), "clips": len(got), "reused_cache": reused}
-        )
+        info = {"name": name, "path": str(path), "clips": len(got), "reused_cache": reused}
+        if Path(path).is_dir():  # a library's terms travel with it (LICENSE*, README*)
+            terms = ("LICENSE", "README", "SOURCE-README")
+            info["license_files"] = sorted(
+                p.name for p in Path(path).iterdir() if p.name.upper().startswith(terms)
+            )
+        source_info.append(info)
         log(f"{name}: {len(got)} clips" + (" (cached)" if reused else ""))
     for origin, reason in problems:
         log(f"skipped {origin}: {reason}")

@@ -177,3 +177,47 @@ def check_record(joints: np.ndarray, record: dict[str, Any]) -> list[CheckResult
     if joints.shape[0] != record["num_people"]:
         raise ValueError(f"record has {record['num_people']} people, joints have {joints.shape[0]}")
     return [check(joints, c) for c in record["constraints"]]
+
+
+def stature(joints: np.ndarray) -> float:
+    """Median head-joint height above the lowest foot joint over frames (m): the body's
+    size that closeness is measured in."""
+    j = np.asarray(joints, dtype=np.float64).reshape(-1, 22, 3)
+    return float(np.median(j[:, 15, 1] - j[:, [7, 8, 10, 11], 1].min(-1)))
+
+
+def pair_closeness(joints: np.ndarray, a: int = 0, b: int = 1) -> dict[str, float]:
+    """How close two people (P, T, 22, 3) are, frame by frame, summarised.
+
+    ``hands_near``: fraction of frames where some wrist of one is within 0.3 x stature of
+    some wrist of the other; ``pelvis``: median floor distance of the pelvises over stature
+    (and in metres); ``facing``: median cosine between a's facing and the direction to b,
+    and b's to a, averaged (1: face to face); ``hands_m``: median nearest-wrists distance;
+    ``min_joint_m``: the closest any two joints of the two bodies come (the inter-person
+    penetration reference: real partners keep this above a few centimetres)."""
+    j = np.asarray(joints, dtype=np.float64)
+    size = 0.5 * (stature(j[a]) + stature(j[b]))
+    wa, wb = j[a][:, [20, 21]], j[b][:, [20, 21]]
+    hands = np.linalg.norm(wa[:, :, None] - wb[:, None], axis=-1).min((1, 2))
+    d = root_xz(j[b]) - root_xz(j[a])
+    pelvis = np.linalg.norm(d, axis=-1)
+    unit = d / np.maximum(pelvis[:, None], 1e-8)
+    face = 0.5 * ((facing_dirs(j[a]) * unit).sum(-1) + (facing_dirs(j[b]) * -unit).sum(-1))
+    return {
+        "stature_m": round(size, 4),
+        "hands_near": round(float((hands < 0.3 * size).mean()), 4),
+        "hands_m": round(float(np.median(hands)), 4),
+        "pelvis": round(float(np.median(pelvis)) / size, 4),
+        "pelvis_m": round(float(np.median(pelvis)), 4),
+        "facing": round(float(np.median(face)), 4),
+        "min_joint_m": round(closest_joints(j[a], j[b])[0], 4),
+    }
+
+
+def measured_relation(joints: np.ndarray) -> dict[str, Any]:
+    """The relation record of a real take, measured on its motion: person 1 against each
+    other person (:func:`pair_closeness`), and whether they touch (hands near in at least a
+    quarter of the frames), so the clean-up and the checks can keep such people close."""
+    pairs = {f"1-{k + 1}": pair_closeness(joints, 0, k) for k in range(1, joints.shape[0])}
+    touch = any(p["hands_near"] >= 0.25 for p in pairs.values())
+    return {"kind": "real-take", "pairs": pairs, "touching": bool(touch)}

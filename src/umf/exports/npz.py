@@ -4,11 +4,14 @@ Keys: ``joints`` (N, T, 22, 3) the motion every other file holds, ``raw_joints``
 positions it was fitted to (decoder output), the rigid bodies ``offsets`` (N, 22, 3),
 ``rotations`` (N, T, 22, 3, 3) local rotations and ``root`` (N, T, 3), ``features``
 (N, T, 262) when the scene was generated, ``text``, ``fps``, ``seed`` (-1: none),
-``model_version`` and ``umf_version``. Metres, Y up, float32.
+``model_version`` and ``umf_version``, and ``coverage`` (JSON: how well the prompt is
+covered by what the model was trained on, :mod:`umf.coverage`) when the model says. Metres,
+Y up, float32.
 """
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any
 
@@ -37,6 +40,8 @@ def scene_arrays(scene: Any) -> dict[str, np.ndarray]:
     }
     if scene.features is not None:
         arrays["features"] = np.asarray(scene.features, dtype=np.float32)
+    if isinstance(scene.meta.get("coverage"), dict):
+        arrays["coverage"] = np.array(json.dumps(scene.meta["coverage"]))
     return arrays
 
 

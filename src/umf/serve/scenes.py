@@ -194,6 +194,8 @@ class SceneStore:
 
     def add_scene(self, scene: Any, params: dict[str, Any]) -> SceneRecord:
         """A generated :class:`umf.pipeline.Scene` with its GLB, NPZ and BVH zip written."""
+        if isinstance(scene.meta.get("coverage"), dict):
+            params = {**params, "coverage": scene.meta["coverage"]}
         record = self.new_record(scene.text, scene.joints, float(scene.fps), scene.num_people,
                                  scene.num_frames, params)  # fmt: skip
         stem = slug(scene.text)

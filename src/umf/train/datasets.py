@@ -555,7 +555,8 @@ class SceneDataset(_EpochDataset):
     """One multi-person scene per item, cropped in time for everybody, in person 1's frame.
 
     Serves the split's composed scenes and, with ``real_clips``, its real multi-person
-    clips (InterHuman). Scenes with more than ``max_people`` people are left out rather
+    clips (InterHuman, mocap takes; each ``real_repeats`` times, with a crop of its own each
+    time). Scenes with more than ``max_people`` people are left out rather
     than truncated: their captions count everybody. ``respell``: as in
     :class:`SingleMotionDataset`.
     """
@@ -572,8 +573,11 @@ class SceneDataset(_EpochDataset):
         max_people: int | None = None,
         real_clips: bool = True,
         respell: bool = False,
+        real_repeats: int = 1,
     ) -> None:
         super().__init__(seed)
+        if real_repeats < 1:
+            raise UMFError(f"real_repeats must be at least 1, got {real_repeats}")
         self.respell = respell
         _check_frames(min_frames, max_frames)
         self.corpus, self.normalizer = corpus, normalizer
@@ -588,7 +592,7 @@ class SceneDataset(_EpochDataset):
             for clip in corpus.split_clips(split):
                 if fits(clip.num_people) and clip.num_frames >= 2:
                     tf = canonical_transform(torch.from_numpy(np.ascontiguousarray(clip.joints[0])))
-                    self.items.append(("clip", clip, tf))
+                    self.items.extend([("clip", clip, tf)] * real_repeats)
         if not self.items:
             raise UMFError(f"{corpus.root}: no multi-person scenes in split {split!r}")
         corpus.actors()  # built once here, so worker processes inherit it

@@ -9,6 +9,7 @@ A run directory holds ``config.yaml`` and one sub-directory per stage (``vae/``,
 from __future__ import annotations
 
 import dataclasses
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -27,6 +28,7 @@ from umf.checkpoint import (
 from umf.config import TrainConfig, UMFConfig, family_config, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
+from umf.representation import Normalizer
 from umf.train.datasets import (
     MixedBatches,
     SceneDataset,
@@ -96,7 +98,8 @@ def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig
 
 
 def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=None,
-             progress: bool = True, stats_vae=None, bank_device: str = "cpu"):  # fmt: skip
+             progress: bool = True, stats_vae=None, bank_device: str = "cpu",
+             normalizer: Normalizer | None = None):  # fmt: skip
     """(train, val, latents) of a stage.
 
     VAE and P-Flow alternate single-person and scene batches (SPEC 6), S-Flow sees scenes
@@ -109,6 +112,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
     """
     from umf.train.latents import LatentBankDataset, build_bank
 
+    normalizer = corpus.normalizer if normalizer is None else normalizer
     most = min(t.max_frames, cfg.vae.max_frames)
     frames = dict(min_frames=min(t.min_frames, most), max_frames=most)
     latents: list = []
@@ -120,7 +124,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         if kind == "single":
             place = train and stage == "vae"
             # hold_rest / repeat_gait define the target, so validation is extended too
-            ds = SingleMotionDataset(corpus, split, corpus.normalizer, random_placement=place,
+            ds = SingleMotionDataset(corpus, split, normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
                                      hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
                                      labels=t.labels,
@@ -129,7 +133,8 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                                      caption_mix_from=t.caption_mix_from,
                                      **common)  # fmt: skip
         else:
-            ds = SceneDataset(corpus, split, corpus.normalizer, **common)
+            ds = SceneDataset(corpus, split, normalizer,
+                              real_repeats=t.real_repeats if train else 1, **common)
         bank = None
         if vae is not None:
             passes = t.latent_passes if train else 1
@@ -181,9 +186,12 @@ def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, se
     return fit_body_normalizer(torch.cat(feats), placement_radius=radius)
 
 
-def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], None]) -> Path:
+def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], None],
+                own_vae: bool = False) -> Path:  # fmt: skip
     """Check a fine-tuning source; give the run that model's VAE if it has none yet (a run
-    that has one must have this very VAE: the flow's weights were trained on its latents)."""
+    that has one must have this very VAE: the flow's weights were trained on its latents),
+    unless ``own_vae``: the run fine-tuned that VAE itself (``umf train finetune``), and the
+    flows start from the model's weights to follow its latents."""
     import shutil
 
     model = Path(model)
@@ -203,6 +211,9 @@ def _init_model(model: Path, stage: str, run_dir: Path, log: Callable[[str], Non
         tmp.rename(run_dir / "vae" / "best")
         log(f"vae: the run uses the VAE of {model}")
         return model
+    if own_vae:
+        log(f"{stage}: starting from {model}'s weights on this run's fine-tuned VAE")
+        return model
     ours, theirs = read_weights(have, "vae"), read_weights(model, "vae")
     same = ours.keys() == theirs.keys() and all(
         ours[k].shape == theirs[k].shape and torch.equal(ours[k].float(), theirs[k].float())
@@ -220,6 +231,26 @@ def _load_frozen(stage_dir: Path, name: str, module: torch.nn.Module, log=print)
         raise UMFError(f"{stage_dir}: no {name} checkpoint; train the {name} stage first")
     load_first_good(checkpoint_candidates(stage_dir), lambda p: load_checkpoint(p, {name: module}),
                     log)  # fmt: skip
+
+
+def stage_normalizer(stage: str, corpus: Corpus, run_dir: Path, init: Path | None) -> Normalizer:
+    """The feature statistics a stage must train with: those its VAE was trained with.
+
+    From scratch that is the corpus's. Fine-tuning on another corpus (``--init``) keeps the
+    model's: a VAE fine-tuned from it, and flows on its latents, read features normalised as
+    the model was trained, whatever the new corpus's own statistics are.
+    """
+    if stage == "vae":
+        if init is not None and (Path(init) / "normalizer.safetensors").exists():
+            return Normalizer.load(Path(init) / "normalizer.safetensors")
+        return corpus.normalizer
+    found = best_or_last(run_dir / "vae")
+    if found is not None:
+        candidates = checkpoint_candidates(run_dir / "vae")
+        ck = load_first_good(candidates, load_checkpoint, lambda _: None)
+        if ck.normalizer is not None:
+            return ck.normalizer
+    return corpus.normalizer
 
 
 def checkpoint_candidates(stage_dir: Path) -> list[Path]:
@@ -296,6 +327,7 @@ def train_stage(
     resume: bool = False,
     max_steps: int | None = None,
     init: Path | None = None,
+    own_vae: bool = False,
     log: Callable[[str], None] = print,
 ) -> dict[str, Any]:
     """Train one stage of a run; the flow stages load the run's trained VAE (frozen).
@@ -318,7 +350,7 @@ def train_stage(
         log(f"{stage}: resuming the run's own checkpoint; --init {init} is not used")
         init = None
     if init is not None:
-        init = _init_model(init, stage, run_dir, log)
+        init = _init_model(init, stage, run_dir, log, own_vae=own_vae)
     corpus = Corpus.load(corpus_dir)
     if cfg.text.respell is None:  # prompts will be respelled into these captions' spelling
         from umf.train.datasets import preferred_spellings
@@ -335,7 +367,7 @@ def train_stage(
         log(f"vae: the encoder trains too, so the latents change; the flows of {init} know "
             "the old ones: retrain them (or set train_vae.decoder_only=true)")  # fmt: skip
     torch.manual_seed(t.seed)
-    normalizer = corpus.normalizer
+    normalizer = stage_normalizer(stage, corpus, run_dir, init)
     if stage == "vae":
         from umf.train.datasets import PLACEMENT_RADIUS
 
@@ -361,7 +393,8 @@ def train_stage(
     bank_vae = st.vae if stage != "vae" and t.latent_passes > 0 else None
     stats_vae = st.vae if stage != "vae" else None
     train_loader, val_loader, latents = _loaders(stage, corpus, cfg, t, bank_vae, launch.progress,
-                                                 stats_vae, bank_device(launch))  # fmt: skip
+                                                 stats_vae, bank_device(launch),
+                                                 normalizer)  # fmt: skip
     if latents is not None:  # a resumed run restores the same statistics from its checkpoint
         st.trainable().latent_norm.fit(latents)
     if init is not None:  # the latent statistics too: the weights were trained with them
@@ -420,3 +453,80 @@ def export_model(
         out, weights, config=cfg.to_dict(), normalizer=ck.normalizer,
         dtype=torch.float16 if fp16 else None,
     )  # fmt: skip
+
+
+# Fine-tuning a released model on a new corpus (`umf train finetune`): what each stage changes
+# from the model's own training options. The corpus should hold the model's own data beside
+# the new library (replay: `umf data prepare --bandai ... --mocap MYLIB`); label balancing then
+# sets how much of each batch is new (docs/training.md measures it), and every real take
+# repeats in the scene batches. Sized for a 2-core CPU: about an hour for a few hundred clips.
+FINETUNE: tuple[str, ...] = (
+    "train_vae.decoder_only=false", "train_vae.lr=0.0001", "train_vae.warmup_steps=20",
+    "train_vae.max_steps=300", "train_vae.balance_labels=0.5", "train_vae.real_repeats=40",
+    "train_vae.val_every=100", "train_vae.ckpt_every=50",
+    "train_pflow.lr=0.0001", "train_pflow.max_steps=500", "train_pflow.balance_labels=0.5",
+    "train_pflow.real_repeats=40", "train_pflow.latent_passes=2", "train_pflow.val_every=250",
+    "train_pflow.ckpt_every=50",
+    "train_sflow.lr=0.0001", "train_sflow.max_steps=500", "train_sflow.real_repeats=40",
+    "train_sflow.latent_passes=2", "train_sflow.val_every=250", "train_sflow.ckpt_every=50",
+)  # fmt: skip
+
+
+def finetune(
+    model: Path,
+    corpus_dir: Path,
+    run_dir: Path,
+    overrides: Sequence[str],
+    launch: Launch,
+    *,
+    resume: bool = False,
+    stages: Sequence[str] = STAGES,
+    log: Callable[[str], None] = print,
+) -> Path:
+    """Fine-tune every stage of ``model`` on ``corpus_dir`` into ``run_dir``; export
+    ``run_dir/model``. The VAE is fine-tuned whole (encoder too: a model that never saw a
+    backflip cannot encode one), so each flow starts from the model's weights and follows
+    the new latents; stages not in ``stages`` are taken from the model unchanged."""
+    model = Path(model)
+    if not (model / "config.json").exists():
+        raise UMFError(f"{model}: not a model directory (no config.json)")
+    unknown = [s for s in stages if s not in STAGES]
+    if unknown or not stages:
+        raise UMFError(f"--stages: choose from {', '.join(STAGES)}, got {', '.join(stages)}")
+    if "vae" not in stages and (set(stages) & {"pflow", "sflow"}):
+        log("the VAE is not fine-tuned: the flows train on the model's own latents")
+    fresh = not (run_dir / "config.yaml").exists()
+    cfg = resolve_config(run_dir, None, model / "config.json" if fresh else None,
+                         [*FINETUNE, *overrides] if fresh else list(overrides))  # fmt: skip
+    own_vae = "vae" in stages
+    for stage in STAGES:
+        if stage not in stages:
+            continue
+        done = run_dir / stage / "done.json"
+        if resume and done.exists():
+            log(f"{stage}: already fine-tuned in {run_dir}")
+            continue
+        summary = train_stage(stage, corpus_dir, run_dir, cfg, launch, resume=resume,
+                              init=model, own_vae=own_vae, log=log)  # fmt: skip
+        from umf.io import write_json_atomic
+
+        write_json_atomic(done, {k: v for k, v in summary.items()
+                                 if isinstance(v, int | float | str | None)})  # fmt: skip
+        log(f"{stage}: {summary.get('steps')} steps in {summary.get('seconds', 0):.0f} s")
+    out = export_model(run_dir, run_dir / "model", base=model, log=log)
+    write_vocabulary(out, corpus_dir)
+    return out
+
+
+def write_vocabulary(model: Path, corpus_dir: Path, threshold: float | None = None):
+    """Give a model directory the vocabulary of the corpus it was trained on
+    (:mod:`umf.coverage`), embedded by the model's own text encoder."""
+    from umf.coverage import THRESHOLD, build_vocabulary
+    from umf.text import build_text_encoder
+
+    cfg = UMFConfig.from_dict(json.loads((Path(model) / "config.json").read_text()))
+    enc = build_text_encoder(cfg.text.encoder, cfg.text.path, max_length=cfg.text.max_length)
+    vocab = build_vocabulary(Corpus.load(corpus_dir), enc, cfg.text.encoder,
+                             THRESHOLD if threshold is None else threshold)  # fmt: skip
+    vocab.save(model)
+    return vocab

@@ -123,6 +123,11 @@ async function show(scene) {
   setStatus("Loading the scene into the viewer…", { busy: true });
   await viewer.load(scene.files.glb, scene.fps);
   $("caption").textContent = scene.text;
+  const cov = scene.coverage;
+  $("coverage").hidden = !(cov && cov.known === false);
+  $("coverage").textContent = cov && cov.known === false
+    ? `Outside what this model was trained on (coverage ${cov.score.toFixed(2)}); nearest known: ${cov.nearest.join("; ")}`
+    : "";
   $("scrubber").max = viewer.frames - 1;
   setDownloads(scene);
   markCurrent(scene.id);

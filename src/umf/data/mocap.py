@@ -1,0 +1,319 @@
+"""Any mocap library as training data: a folder of BVH / DeepMimic files -> clips.
+
+``umf data prepare --mocap DIR`` (repeatable). What DIR may hold:
+
+- motion files, found recursively: ``*.bvh`` on any skeleton of :mod:`umf.data.skeletons`
+  (or one described by ``DIR/skeleton.json``), and DeepMimic ``*.txt`` / ``*.json`` files
+  with a ``"Frames"`` list (:mod:`umf.data.deepmimic`); any unit (the one that makes the
+  body an adult's size, else a stature scale) and frame rate (resampled to 30 fps);
+- ``captions.csv`` (header ``file,caption`` and optionally ``label``): one row per caption,
+  several rows per file, ``file`` relative to DIR (or a take's name); ``label`` names the
+  action (it groups clips for the split); a file without a caption is captioned from its
+  name, and the report lists it;
+- ``takes.csv`` (header ``take,file,person``, optionally ``dx,dz``): files captured
+  together. Each take is one real multi-person clip in its shared world frame (its files
+  must have the same frame rate and length, and one unit is used for all of them);
+  ``dx,dz`` (metres) shift that person on the floor, a placement correction for captures
+  whose files do not quite share a frame (say so in the library's README).
+
+Every clip keeps its file, the skeleton it was read as, the unit and frame rate used. Takes
+and files are split by :func:`umf.data.corpus.assign_splits` (one take is one clip, so no take
+is in two splits). A file that cannot be read is skipped with its reason in the report; a
+malformed ``captions.csv`` / ``takes.csv`` or a take whose files disagree is an error.
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import re
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from umf.data.clip import FPS, MotionClip
+from umf.data.skeletons import SkeletonMap, choose_unit, read_skeleton_json, recognise
+from umf.errors import UMFError
+
+MOTION_SUFFIXES = (".bvh", ".txt", ".json")
+META_FILES = {"captions.csv", "takes.csv", "skeleton.json"}
+MAX_TAKE_LENGTH_MISMATCH = 1  # frames: conversions sometimes drop the last frame of one file
+LOOP_SECONDS = 6.0  # a looping clip (DeepMimic "Loop": "wrap") is repeated up to this long
+
+
+@dataclass
+class RawMotion:
+    """One file's people in file units, before the unit is chosen (a take shares one)."""
+
+    joints: np.ndarray  # (F, 22, 3), file units
+    fps: float
+    skeleton: str
+    unit: float | None = None  # fixed by the format or skeleton.json
+    loops: bool = False
+
+
+@dataclass
+class MocapLibrary:
+    """The files, captions and takes of one ``--mocap`` folder."""
+
+    root: Path
+    files: list[str]  # relative paths, sorted
+    captions: dict[str, list[str]] = field(default_factory=dict)
+    labels: dict[str, str] = field(default_factory=dict)
+    takes: dict[str, list[tuple[str, int, float, float]]] = field(default_factory=dict)
+    skeleton: SkeletonMap | None = None
+
+
+# --------------------------------------------------------------------- reading files
+def read_motion(path: Path, skeleton: SkeletonMap | None = None) -> RawMotion:
+    """SMPL-22 joints of one motion file, in its own unit (one-line errors)."""
+    if not path.is_file():
+        raise UMFError(f"motion file not found: {path}")
+    try:
+        text = path.read_bytes().decode("utf-8-sig", errors="replace")
+    except OSError as exc:
+        raise UMFError(f"{path}: cannot be read ({exc.strerror or type(exc).__name__})") from None
+    if path.suffix.lower() == ".bvh":
+        raw = _read_bvh(text, path, skeleton)
+    else:
+        from umf.data.deepmimic import is_deepmimic, read_deepmimic
+
+        if not is_deepmimic(text):
+            raise UMFError(f"{path}: not a DeepMimic motion (no 'Frames')")
+        joints, fps, loops = read_deepmimic(path, text)
+        raw = RawMotion(joints, fps, "deepmimic", 1.0, loops)
+    if skeleton is not None and skeleton.fps is not None:
+        raw.fps = skeleton.fps
+    if skeleton is not None and skeleton.unit is not None:
+        raw.unit = skeleton.unit
+    if not np.isfinite(raw.joints).all():
+        raise UMFError(f"{path}: non-finite values in the motion")
+    if not 1.0 <= raw.fps <= 1000.0:
+        raise UMFError(f"{path}: implausible frame rate {raw.fps:g} fps")
+    if raw.joints.shape[0] < 2:
+        raise UMFError(f"{path}: fewer than 2 frames")
+    return raw
+
+
+def _read_bvh(text: str, path: Path, skeleton: SkeletonMap | None) -> RawMotion:
+    from umf.data.bvh import forward_kinematics, parse_bvh
+
+    bvh = parse_bvh(text, str(path))
+    if not bvh.frame_time > 0:
+        raise UMFError(f"{path}: 'Frame Time: {bvh.frame_time:g}' (must be positive seconds)")
+    table = (
+        skeleton if skeleton is not None and skeleton.sources else recognise(bvh.names, str(path))
+    )
+    missing = table.missing(bvh.names)
+    if missing:
+        raise UMFError(f"{path}: no joint(s) {', '.join(missing)} for the {table.name} mapping")
+    pos, rot = forward_kinematics(bvh)
+    joints = table.apply(bvh.names, pos, rot, bvh.end_sites)
+    return RawMotion(joints, 1.0 / bvh.frame_time, table.name)
+
+
+def to_metres(raws: list[RawMotion]) -> tuple[list[np.ndarray], float, str]:
+    """The people of one take in metres with one shared unit (the file's or skeleton.json's
+    when fixed, else chosen on all of them together)."""
+    fixed = {r.unit for r in raws if r.unit is not None}
+    if len(fixed) > 1:
+        raise UMFError("the files of one take have different units")
+    if fixed:
+        unit, how = fixed.pop(), "given"
+    else:
+        unit, how = choose_unit(np.concatenate([r.joints for r in raws]))
+    return [(r.joints * unit).astype(np.float32) for r in raws], unit, how
+
+
+def tile_loop(joints: np.ndarray, min_frames: int) -> np.ndarray:
+    """A cyclic clip (T, 22, 3) repeated until it has ``min_frames`` frames: each repeat
+    starts where (and facing where) the previous one ended, so a walk keeps walking and a
+    spin keeps turning. The clip's last frame is the next cycle's first, as in DeepMimic."""
+    from umf.data.relations import facing_dirs
+
+    out = [joints]
+    cycle = joints[1:]
+    f0 = facing_dirs(joints[0])
+    a0 = np.arctan2(f0[0], f0[1])
+    while sum(len(c) for c in out) < min_frames and len(joints) > 1:
+        end = out[-1][-1]
+        f1 = facing_dirs(end)
+        yaw = np.arctan2(f1[0], f1[1]) - a0  # about +Y, x-z plane
+        c, s = np.cos(yaw), np.sin(yaw)
+        rel = cycle - joints[0, 0] * np.array([1.0, 0.0, 1.0])
+        x, z = rel[..., 0], rel[..., 2]
+        nxt = rel.copy()
+        nxt[..., 0], nxt[..., 2] = c * x + s * z, -s * x + c * z
+        nxt[..., [0, 2]] += end[0, [0, 2]]
+        out.append(nxt.astype(joints.dtype))
+    return np.concatenate(out)
+
+
+# --------------------------------------------------------------------- the folder
+def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] = ()) -> list[dict]:
+    try:
+        text = path.read_bytes().decode("utf-8-sig")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise UMFError(f"{path}: not a readable UTF-8 file ({type(exc).__name__})") from None
+    rows = list(csv.DictReader(io.StringIO(text)))
+    header = [h.strip() for h in (csv.DictReader(io.StringIO(text)).fieldnames or [])]
+    if tuple(header[: len(required)]) != required or not set(header) <= set(required + optional):
+        raise UMFError(f"{path}: header must be {','.join(required)}"
+                       + (f" (optionally {','.join(optional)})" if optional else "")
+                       + f", got {','.join(header) or 'nothing'}")  # fmt: skip
+    out = []
+    for n, row in enumerate(rows, start=2):
+        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+        if any(not row.get(k) for k in required):
+            raise UMFError(
+                f"{path}, line {n}: empty {'/'.join(k for k in required if not row.get(k))}"
+            )
+        row["_line"] = n
+        out.append(row)
+    return out
+
+
+def scan_library(root: str | Path) -> MocapLibrary:
+    """Files, captions, takes and skeleton mapping of a mocap folder (nothing read yet)."""
+    root = Path(root)
+    if not root.is_dir():
+        raise UMFError(f"mocap library not found (not a folder): {root}")
+    files = sorted(
+        p.relative_to(root).as_posix()
+        for p in root.rglob("*")
+        if p.is_file() and p.suffix.lower() in MOTION_SUFFIXES and p.name not in META_FILES
+        and not any(part.startswith(".") for part in p.relative_to(root).parts)
+    )  # fmt: skip
+    lib = MocapLibrary(root, files)
+    if (root / "skeleton.json").exists():
+        lib.skeleton = read_skeleton_json(root / "skeleton.json")
+    if (root / "takes.csv").exists():
+        path = root / "takes.csv"
+        for row in _read_csv(path, ("take", "file", "person"), ("dx", "dz")):
+            where = f"{path}, line {row['_line']}"
+            if row["file"] not in files:
+                raise UMFError(f"{where}: no motion file {row['file']!r} in {root}")
+            try:
+                person = int(row["person"])
+                dx, dz = float(row.get("dx") or 0), float(row.get("dz") or 0)
+            except ValueError:
+                raise UMFError(f"{where}: person must be a whole number, dx/dz numbers") from None
+            if not 1 <= person <= 16 or not (np.isfinite(dx) and np.isfinite(dz)):
+                raise UMFError(f"{where}: person must be 1..16 and dx/dz finite")
+            lib.takes.setdefault(row["take"], []).append((row["file"], person, dx, dz))
+        for take, members in lib.takes.items():
+            people = sorted(p for _, p, *_ in members)
+            if people != list(range(1, len(people) + 1)):
+                raise UMFError(f"{path}: take {take!r} must number its people 1..{len(people)}, "
+                               f"got {people}")  # fmt: skip
+            members.sort(key=lambda m: m[1])
+        taken = [f for ms in lib.takes.values() for f, *_ in ms]
+        twice = sorted({f for f in taken if taken.count(f) > 1})
+        if twice:
+            raise UMFError(f"{path}: file(s) in more than one take: {', '.join(twice)}")
+    if (root / "captions.csv").exists():
+        path = root / "captions.csv"
+        known = set(files) | set(lib.takes)
+        for row in _read_csv(path, ("file", "caption"), ("label",)):
+            key = row["file"]
+            if key not in known:
+                raise UMFError(f"{path}, line {row['_line']}: no motion file or take {key!r}")
+            lib.captions.setdefault(key, []).append(row["caption"])
+            if row.get("label"):
+                lib.labels[key] = row["label"]
+    return lib
+
+
+def name_caption(name: str) -> str:
+    """A caption from a file name: ``jump_up-02.bvh`` -> "a person: jump up"."""
+    words = re.sub(r"[\d_\-.]+", " ", Path(name).stem).split()
+    return "a person: " + " ".join(words) if words else "a person moves"
+
+
+def _label(name: str) -> str:
+    return re.sub(r"[\d_\-. ]+", "-", Path(name).stem).strip("-").lower() or "motion"
+
+
+def load_mocap(
+    path: str | Path, problems: list[tuple[str, str]] | None = None, source: str = "mocap"
+) -> Iterator[MotionClip]:
+    """Every readable take and single file of a mocap folder as a clip (module notes).
+
+    Unreadable files go into ``problems`` with their reason; files captioned from their
+    name go there too (reason "no caption in captions.csv: captioned ..."), so the report
+    lists them. Without ``problems`` the first error is raised.
+    """
+    lib = scan_library(path)
+    if not lib.files:
+        raise UMFError(f"{lib.root}: no motion files (.bvh, or DeepMimic .txt/.json)")
+    in_take = {f: take for take, ms in lib.takes.items() for f, *_ in ms}
+    items: list[tuple[str, list[tuple[str, int, float, float]]]] = [
+        (take, ms) for take, ms in sorted(lib.takes.items())
+    ]
+    items += [(f, [(f, 1, 0.0, 0.0)]) for f in lib.files if f not in in_take]
+    for key, members in items:
+        is_take = key in lib.takes
+        try:
+            raws = []
+            for f, *_ in members:
+                try:
+                    raws.append(read_motion(lib.root / f, lib.skeleton))
+                except UMFError as exc:
+                    if is_take:  # a take without one of its people is not that take
+                        raise UMFError(f"take {key!r}: {exc}") from None
+                    raise
+            clip = _clip(lib, key, members, raws, is_take, source)
+        except UMFError as exc:
+            if problems is None or (is_take and "different" in str(exc)):
+                raise
+            problems.append((str(lib.root / key), str(exc).splitlines()[0]))
+            continue
+        if key not in lib.captions and problems is not None:
+            problems.append((str(lib.root / key), f"no caption in captions.csv: captioned "
+                                                  f"{clip.captions[0]!r}"))  # fmt: skip
+        yield clip
+
+
+def _clip(lib: MocapLibrary, key: str, members, raws: list[RawMotion], is_take: bool,
+          source: str) -> MotionClip:  # fmt: skip
+    from umf.data.bandai import resample
+
+    rates = {round(r.fps, 3) for r in raws}
+    if len(rates) > 1:
+        raise UMFError(f"take {key!r}: its files have different frame rates "
+                       f"({', '.join(f'{r:g}' for r in sorted(rates))} fps)")  # fmt: skip
+    lengths = [r.joints.shape[0] for r in raws]
+    if max(lengths) - min(lengths) > MAX_TAKE_LENGTH_MISMATCH:
+        raise UMFError(f"take {key!r}: its files have different lengths "
+                       f"({', '.join(map(str, lengths))} frames)")  # fmt: skip
+    people, unit, how = to_metres(raws)
+    t = min(lengths)
+    joints = np.stack([p[:t] for p in people])
+    for i, (_, _, dx, dz) in enumerate(members):
+        joints[i, :, :, 0] += dx
+        joints[i, :, :, 2] += dz
+    joints = resample(np.ascontiguousarray(joints), raws[0].fps, FPS)
+    captions = lib.captions.get(key) or [name_caption(key)]
+    meta = {
+        "content": lib.labels.get(key) or _label(key),
+        "style": "",
+        "file": key if not is_take else ",".join(f for f, *_ in members),
+        "library": lib.root.name,
+        "skeleton": ",".join(sorted({r.skeleton for r in raws})),
+        "unit": round(unit, 6),
+        "unit_from": how,
+        "source_fps": round(raws[0].fps, 3),
+    }
+    if is_take:
+        meta["take"] = key
+        from umf.data.relations import measured_relation
+
+        meta["measured"] = measured_relation(joints)
+    if raws[0].loops and len(raws) == 1:
+        meta["loops"] = True
+        meta["cycle_frames"] = joints.shape[1]
+        joints = tile_loop(joints[0], int(LOOP_SECONDS * FPS))[None]
+    cid = f"{lib.root.name}/{Path(key).with_suffix('').as_posix() if not is_take else key}"
+    return MotionClip(cid, source, joints, captions, FPS, meta=meta)
