@@ -8,7 +8,8 @@ import torch
 
 from conftest import BANDAI_FIXTURE
 from umf.data.bvh import write_smpl22_bvh
-from umf.data.motion_file import guess_unit, load_motion
+from umf.data.motion_file import load_motion
+from umf.data.skeletons import choose_unit
 from umf.errors import UMFError
 from umf.skeleton import fit_offsets, inverse_kinematics
 
@@ -23,10 +24,10 @@ def _write(path, joints: np.ndarray, scale: float, fps: float) -> None:
     write_smpl22_bvh(path, local.numpy(), j[:, 0].numpy() / scale, offsets.numpy() / scale, fps)
 
 
-@pytest.mark.parametrize("unit", [1.0, 0.01, 0.001, 0.0254])
+@pytest.mark.parametrize("unit", [1.0, 0.01, 0.001, 0.0254, 0.0254 / 0.45])
 def test_units_are_recognised(real_joints, unit):
     joints = real_joints.numpy()
-    assert guess_unit(joints / unit) == unit
+    assert choose_unit(joints / unit)[0] == unit
 
 
 @pytest.mark.parametrize("unit", [1.0, 0.01, 0.0254])

@@ -40,6 +40,7 @@ from umf.errors import UMFError
 MOTION_SUFFIXES = (".bvh", ".txt", ".json")
 META_FILES = {"captions.csv", "takes.csv", "skeleton.json"}
 MAX_TAKE_LENGTH_MISMATCH = 1  # frames: conversions sometimes drop the last frame of one file
+REFERENCE_JUMP = 0.06  # of the body's size: a first frame this far from the next is a pose
 LOOP_SECONDS = 6.0  # a looping clip (DeepMimic "Loop": "wrap") is repeated up to this long
 
 
@@ -111,7 +112,23 @@ def _read_bvh(text: str, path: Path, skeleton: SkeletonMap | None) -> RawMotion:
         raise UMFError(f"{path}: no joint(s) {', '.join(missing)} for the {table.name} mapping")
     pos, rot = forward_kinematics(bvh)
     joints = table.apply(bvh.names, pos, rot, bvh.end_sites)
-    return RawMotion(joints, 1.0 / bvh.frame_time, table.name)
+    return RawMotion(drop_reference_pose(joints), 1.0 / bvh.frame_time, table.name)
+
+
+def drop_reference_pose(joints: np.ndarray) -> np.ndarray:
+    """Without a first frame that is a reference pose rather than motion: conversions such
+    as CMU's cgspeed BVH start with a T-pose. Told by the pose (root-relative joints) jumping
+    by more than :data:`REFERENCE_JUMP` on average between frames 0 and 1, which no captured
+    motion does in one frame."""
+    if joints.shape[0] < 3:
+        return joints
+    rel = joints[:3] - joints[:3, :1]
+    first, second = (np.linalg.norm(rel[1] - rel[0], axis=-1).mean(),
+                     np.linalg.norm(rel[2] - rel[1], axis=-1).mean())  # fmt: skip
+    scale = np.ptp(rel[1], axis=0).max()  # the body's size in file units
+    if first > REFERENCE_JUMP * scale and first > 10 * second:
+        return joints[1:]
+    return joints
 
 
 def to_metres(raws: list[RawMotion]) -> tuple[list[np.ndarray], float, str]:

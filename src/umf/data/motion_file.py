@@ -1,9 +1,10 @@
 """Read a user's motion file as a :class:`umf.scene.Scene`: umf ``.npz`` scenes and ``.bvh``.
 
 What ``umf react --actor`` and ``umf data show`` accept. BVH files may be on our SMPL-22
-hierarchy (what ``umf generate --format bvh`` writes) or on the Bandai skeleton, at any
-frame rate and in metres, centimetres, millimetres or inches: the unit is the one that
-makes the body about as tall as a person, and the motion is resampled to 30 fps. The
+hierarchy (what ``umf generate --format bvh`` writes) or any skeleton the mocap importer
+reads (:mod:`umf.data.skeletons`: Bandai, CMU, Mixamo, SMPL names, or a ``skeleton.json``
+beside the file), at any frame rate and in any unit: the one that makes the body an
+adult's size (:func:`umf.data.skeletons.choose_unit`), and the motion is resampled to 30 fps. The
 result is the same container as a generated scene (fitted to one rigid body per person,
 which leaves a rigid skeleton's joints as they are), so it can be written in any format.
 """
@@ -18,23 +19,7 @@ from umf.errors import UMFError
 from umf.scene import Scene
 
 FPS = 30.0
-# Candidate units of a BVH file, in metres per unit.
-UNITS = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254}
-PERSON_HEIGHT = 1.5  # metres: head-to-toe joint span of an adult, what a unit guess aims for
-
-
 Motion = Scene  # what load_motion returned before scenes and motion files were one class
-
-
-def guess_unit(joints: np.ndarray) -> float:
-    """Metres per file unit: the candidate that brings the first pose's height (any axis
-    span of a standing body is dominated by its height) closest to a person's, in log
-    scale so a child in metres and a giant in centimetres are still told apart."""
-    first = joints[..., 0, :, :].reshape(-1, 22, 3)
-    span = float(np.ptp(first, axis=1).max())
-    if not np.isfinite(span) or span <= 0:
-        raise UMFError("the motion has no extent (all joints at one point)")
-    return min(UNITS.values(), key=lambda u: abs(np.log(span * u / PERSON_HEIGHT)))
 
 
 def _load_npz(path: Path) -> tuple[np.ndarray, str, float]:
@@ -57,27 +42,15 @@ def _load_npz(path: Path) -> tuple[np.ndarray, str, float]:
 
 
 def _load_bvh(path: Path) -> tuple[np.ndarray, float]:
-    from umf.data.bandai import retarget_to_smpl22
-    from umf.data.bvh import forward_kinematics, read_bvh
-    from umf.skeleton import JOINT_NAMES
+    """A BVH on any skeleton :mod:`umf.data.skeletons` recognises (SMPL-named, Bandai, CMU
+    cgspeed or Daz, Mixamo), or one a ``skeleton.json`` beside it describes, in metres."""
+    from umf.data.mocap import read_motion, to_metres
+    from umf.data.skeletons import read_skeleton_json
 
-    bvh = read_bvh(path)
-    if not bvh.frame_time > 0:
-        raise UMFError(f"{path}: 'Frame Time: {bvh.frame_time:g}' (must be positive seconds)")
-    pos, _ = forward_kinematics(bvh)
-    pos = np.asarray(pos, dtype=np.float64)
-    index = {n: i for i, n in enumerate(bvh.names)}
-    if all(n in index for n in JOINT_NAMES):  # SMPL-22 by name, whatever the file's order
-        joints = pos[:, [index[n] for n in JOINT_NAMES]]
-    else:
-        try:  # the Bandai skeleton; retarget_to_smpl22 also turns cm into m, undo that
-            joints = retarget_to_smpl22(pos, bvh.names).astype(np.float64) * 100.0
-        except KeyError as exc:
-            raise UMFError(
-                f"{path}: skeleton of {pos.shape[1]} joints is neither SMPL-22 nor Bandai"
-            ) from exc
-    joints = joints * guess_unit(joints)
-    return joints[None].astype(np.float32), 1.0 / bvh.frame_time
+    mapping = path.parent / "skeleton.json"
+    raw = read_motion(path, read_skeleton_json(mapping) if mapping.exists() else None)
+    (joints,), _, _ = to_metres([raw])
+    return joints[None].astype(np.float32), raw.fps
 
 
 def load_motion(path: str | Path) -> Scene:
