@@ -48,7 +48,13 @@ def star_bvh(names, offsets, root_path, fps=30.0, prefix="", end_sites=None) -> 
         lines += [f"  JOINT {prefix}{n}", "  {", "    OFFSET " + " ".join(f"{v:.6f}" for v in off),
                   "    CHANNELS 3 Zrotation Xrotation Yrotation"]  # fmt: skip
         end = (end_sites or {}).get(n, (0.0, 0.0, 0.01))
-        lines += ["    End Site", "    {", "      OFFSET " + " ".join(map(str, end)), "    }", "  }"]
+        lines += [
+            "    End Site",
+            "    {",
+            "      OFFSET " + " ".join(map(str, end)),
+            "    }",
+            "  }",
+        ]
     lines += ["}", "MOTION", f"Frames: {len(root_path)}", f"Frame Time: {1.0 / fps:.8f}"]
     zeros = " ".join(["0"] * (3 + 3 * (len(names) - 1)))
     lines += [" ".join(f"{v:.6f}" for v in p) + " " + zeros for p in root_path]
@@ -214,7 +220,10 @@ def _two_person_library(tmp_path: Path, lengths=(40, 40), fps=(30.0, 30.0)) -> P
 def test_a_take_is_one_clip_of_its_people_in_their_shared_frame(tmp_path):
     lib = _two_person_library(tmp_path)
     (clip,) = list(load_mocap(lib, []))
-    assert clip.num_people == 2 and clip.captions == ["Two people meet.", "Two people come together."]
+    assert clip.num_people == 2 and clip.captions == [
+        "Two people meet.",
+        "Two people come together.",
+    ]
     assert clip.meta["take"] == "meet" and clip.meta["content"] == "meet"
     assert clip.meta["unit_from"] == "cmu"
     gap = clip.joints[1, :, 0, 0] - clip.joints[0, :, 0, 0]
@@ -224,7 +233,9 @@ def test_a_take_is_one_clip_of_its_people_in_their_shared_frame(tmp_path):
 
 def test_placement_correction_moves_one_person(tmp_path):
     lib = _two_person_library(tmp_path)
-    (lib / "takes.csv").write_text("take,file,person,dx,dz\nmeet,p1.bvh,1,0,0\nmeet,p2.bvh,2,-0.5,0\n")
+    (lib / "takes.csv").write_text(
+        "take,file,person,dx,dz\nmeet,p1.bvh,1,0,0\nmeet,p2.bvh,2,-0.5,0\n"
+    )
     (clip,) = list(load_mocap(lib, []))
     assert np.allclose(clip.joints[1, :, 0, 0] - clip.joints[0, :, 0, 0], 0.5, atol=1e-4)
 
@@ -314,7 +325,9 @@ def test_real_libraries_import(tmp_path, lib):
         f = facing_dirs(c.joints[:, 0])
         assert ((v * f).sum(-1) > 0).all()
     else:
-        j = {k.rsplit("_", 1)[-1] if "humanoid3d_" in k else k: c.joints[0] for k, c in clips.items()}
+        j = {
+            k.rsplit("_", 1)[-1] if "humanoid3d_" in k else k: c.joints[0] for k, c in clips.items()
+        }
         assert (j["backflip"][:, 15, 1] < j["backflip"][:, 0, 1]).any()  # head below pelvis
         assert (j["cartwheel"][:, 15, 1] < j["cartwheel"][:, 0, 1]).any()
         assert np.median(j["crawl"][:, 0, 1]) < 0.6

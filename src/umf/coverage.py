@@ -42,6 +42,8 @@ class Vocabulary:
     actions: list[str] = field(default_factory=list)
     styles: list[str] = field(default_factory=list)
     relations: list[str] = field(default_factory=list)
+    # captions of real takes whose people touch -> how close they come (umf.separation)
+    contact: dict[str, dict[str, float]] = field(default_factory=dict)
 
     def save(self, model_dir: str | Path) -> None:
         model_dir = Path(model_dir)
@@ -51,6 +53,7 @@ class Vocabulary:
         write_json_atomic(model_dir / VOCABULARY_JSON, {
             "encoder": self.encoder, "threshold": self.threshold, "actions": self.actions,
             "styles": self.styles, "relations": self.relations, "phrases": self.phrases,
+            "contact": self.contact,
         })  # fmt: skip
 
     @classmethod
@@ -70,9 +73,12 @@ class Vocabulary:
             raise UMFError(f"{model_dir}: corrupt vocabulary ({type(exc).__name__})") from None
         if emb.ndim != 2 or emb.shape[0] != len(phrases) or not torch.isfinite(emb).all():
             raise UMFError(f"{model_dir}: vocabulary embeddings do not match its phrases")
+        contact = doc.get("contact", {})
+        if not isinstance(contact, dict):
+            raise UMFError(f"{model_dir}: corrupt vocabulary (contact)")
         return cls(phrases, emb, str(doc.get("encoder", "")), threshold,
                    list(doc.get("actions", [])), list(doc.get("styles", [])),
-                   list(doc.get("relations", [])))  # fmt: skip
+                   list(doc.get("relations", [])), contact)  # fmt: skip
 
     def score(self, prompts: Sequence[str], encoder) -> list[dict[str, Any]]:
         """Coverage of each prompt (module notes), in the encoder the vocabulary was built with."""
@@ -85,8 +91,12 @@ class Vocabulary:
         out = []
         for row, ids in zip(top.tolist(), idx.tolist(), strict=True):
             s = float(row[0])
-            out.append({"score": round(s, 4), "known": bool(s >= self.threshold),
-                        "nearest": [self.phrases[i] for i in ids]})  # fmt: skip
+            cov = {"score": round(s, 4), "known": bool(s >= self.threshold),
+                   "nearest": [self.phrases[i] for i in ids]}  # fmt: skip
+            touch = self.contact.get(self.phrases[ids[0]])
+            if cov["known"] and touch is not None:
+                cov["contact"] = dict(touch)  # a prompt worded like a touching take's caption
+            out.append(cov)
         return out
 
 
@@ -119,9 +129,32 @@ def build_vocabulary(
     for r in corpus.scenes.get("train", []):
         texts.update(r["captions"])
         relations.add(str(r["relation"]))
+    contact = take_contacts(clips)
     phrases = sorted(t for t in texts if t.strip())
     return Vocabulary(phrases, embed(encoder, phrases), encoder_name, threshold,
-                      sorted(actions), sorted(styles), sorted(relations))  # fmt: skip
+                      sorted(actions), sorted(styles), sorted(relations), contact)  # fmt: skip
+
+
+def take_contacts(clips) -> dict[str, dict[str, float]]:
+    """For each caption of a real multi-person take whose people touch (hands near in at
+    least a quarter of its frames, :func:`umf.data.relations.pair_closeness`), how close its
+    people come: the smallest over those takes of the 5th-percentile closest-joints and
+    pelvis distances. What the data holds close, the clean-up lets stay close."""
+    from umf.data.relations import pair_closeness
+
+    out: dict[str, dict[str, float]] = {}
+    for c in clips:
+        if c.num_people < 2:
+            continue
+        pairs = [pair_closeness(c.joints, 0, k) for k in range(1, c.num_people)]
+        if not any(p["hands_near"] >= 0.25 for p in pairs):
+            continue
+        near = {"closest_m": min(p["closest_p05_m"] for p in pairs),
+                "pelvis_m": min(p["pelvis_p05_m"] for p in pairs)}  # fmt: skip
+        for caption in c.captions:
+            have = out.get(caption)
+            out[caption] = near if have is None else {k: min(have[k], near[k]) for k in near}
+    return out
 
 
 def warning_line(prompt: str, cov: dict[str, Any]) -> str:

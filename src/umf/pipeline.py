@@ -254,7 +254,9 @@ class UMFPipeline:
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
             indices = [req.sample_indices[i] for i in part]
-            for scene in self._sample(texts, indices, req, seed, actor, separate, anchor, fit):
+            near = [(covered[t] or {}).get("contact") for t in texts]
+            for scene in self._sample(texts, indices, req, seed, actor, separate, anchor, fit,
+                                      near):  # fmt: skip
                 if covered[scene.text] is not None:
                     scene.meta["coverage"] = covered[scene.text]
                 scenes.append(scene)
@@ -270,8 +272,11 @@ class UMFPipeline:
         separate: bool,
         anchor: bool,
         fit: bool,
+        contact: list[dict | None] | None = None,
     ) -> list[Scene]:
-        """One chunk of scenes, each drawing its noise from its own stream."""
+        """One chunk of scenes, each drawing its noise from its own stream; ``contact``:
+        per scene, how close the real takes its prompt is worded like let people come
+        (None: the default separation)."""
         num_people, guidance = req.num_people, req.guidance
         gen = scene_generators(seed, indices, self.device)
         b = len(prompts)
@@ -331,8 +336,9 @@ class UMFPipeline:
         shifts = np.zeros((b, num_people, 3), dtype=np.float32)
         fitted = []
         for i in range(b):
+            near = None if contact is None else contact[i]
             shifts[i], bodies = clean_up(decoded[i], contacts[i], floor, clean, anchor,
-                                         separate, fit)  # fmt: skip
+                                         separate, fit, near)  # fmt: skip
             fitted.append(bodies)
         if shifts.any():  # the features move with the people (positions only)
             offset = torch.from_numpy(shifts).to(feats).repeat(1, 1, 22)  # (B, N, 66)
@@ -399,6 +405,7 @@ def clean_up(
     anchor: bool = True,
     separate: bool = True,
     fit: bool = True,
+    contact: dict | None = None,
 ) -> tuple[np.ndarray, Bodies | None]:
     """What the pipeline does to one scene's decoded joints (N, T, 22, 3) with contact
     labels (N, T, 4) before anything is written, in this order:
@@ -406,7 +413,9 @@ def clean_up(
     1. ``anchor`` (only with ``fit``): people with ``clean`` moved back by the slide of a
        planted foot (:mod:`umf.anchoring`);
     2. ``separate``: people 2..N shifted rigidly apart on the floor (:mod:`umf.separation`),
-       judged on the anchored paths;
+       judged on the anchored paths; with ``contact`` (``{"closest_m", "pelvis_m"}``: how
+       close the real takes the prompt is worded like bring their people, from the model's
+       vocabulary) only as far as those takes keep them, so partners may touch;
     3. ``fit``: one rigid body each, planted feet pinned and people with ``clean`` kept off
        the ``floor`` (:mod:`umf.kinematics`).
 
@@ -415,10 +424,24 @@ def clean_up(
     start = anchor_people(decoded, contacts, floor, clean) if anchor and fit else decoded
     shifts = np.zeros((decoded.shape[0], 3), dtype=np.float32)
     if separate and decoded.shape[0] > 1:
-        _, shifts = separate_people(start)
+        _, shifts = separate_people(start, **touching_distances(contact))
     if not fit:
         return shifts, None
     return shifts, fit_bodies(start + shifts[:, None, None, :], contacts, floor, clean)
+
+
+def touching_distances(contact: dict | None) -> dict[str, float]:
+    """:func:`umf.separation.separate_people`'s distances: its defaults, or for a prompt
+    worded like a touching take, that take's closeness (never closer than
+    :data:`umf.separation.TOUCH_FLOOR` between joints: bodies still must not pass
+    through each other)."""
+    from umf.separation import CONTACT_DISTANCE, FIT_MARGIN, MIN_DISTANCE, TOUCH_FLOOR
+
+    if not contact:
+        return {}
+    closest = max(float(contact.get("closest_m", CONTACT_DISTANCE)), TOUCH_FLOOR)
+    return {"min_distance": min(MIN_DISTANCE, float(contact.get("pelvis_m", MIN_DISTANCE))),
+            "contact_distance": min(CONTACT_DISTANCE, closest) + FIT_MARGIN}  # fmt: skip
 
 
 def delivered_joints(

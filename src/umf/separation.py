@@ -8,7 +8,9 @@ whole along the floor, as little as needed, until at every frame their pelvis ke
 within ``contact_distance`` of another person's joint: the training scenes' own rule (the
 composer keeps people 25 cm apart), so hands and elbows do not pass through a neighbour.
 Person 1 never moves (in ``react`` mode it is the user's own motion), and each person's
-motion is unchanged up to that one translation. Evaluation turns it off
+motion is unchanged up to that one translation. People the data holds close (a prompt worded
+like the caption of a real take whose partners touch, such as CMU's salsa couples) keep the
+closeness of that take instead (:func:`umf.pipeline.touching_distances`). Evaluation turns it off
 (``separate=False``) to score the model's own output.
 """
 
@@ -18,8 +20,12 @@ import numpy as np
 
 from umf.data.relations import CONTACT_DISTANCE, closest_joints
 
+__all__ = ["CONTACT_DISTANCE", "FIT_MARGIN", "MIN_DISTANCE", "TOUCH_FLOOR", "separate_people"]
+
 MIN_DISTANCE = 0.5  # metres between two pelvises on the floor: shoulder to shoulder
 STEP_MARGIN = 0.01  # m pushed beyond what is missing: fewer rounds when the worst pair changes
+TOUCH_FLOOR = 0.02  # m: the least joint distance allowed between people who touch (a held
+# hand's wrists); real salsa partners' closest joints stay above it in 95 % of frames
 FIT_MARGIN = 0.03  # m added to the contact distance: the kinematic fit that follows moves
 # joints by up to a few centimetres (umf.kinematics), and they must still not touch
 

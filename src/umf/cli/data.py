@@ -23,8 +23,10 @@ def prepare(
     ),
     interhuman: Path | None = typer.Option(None, help="InterHuman root (motions_processed/...)."),
     mocap: list[Path] = typer.Option(
-        [], "--mocap", help="A folder of BVH / DeepMimic files, with optional captions.csv, "
-        "takes.csv and skeleton.json (repeatable; docs/data.md)."
+        [],
+        "--mocap",
+        help="A folder of BVH / DeepMimic files, with optional captions.csv, "
+        "takes.csv and skeleton.json (repeatable; docs/data.md).",
     ),
     seed: int = typer.Option(1234, help="Seed of the split-independent scene composer."),
     train_scenes: int = typer.Option(3000, help="Two-person scenes composed from train clips."),

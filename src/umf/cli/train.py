@@ -115,8 +115,16 @@ def finetune_command(
 
     model = default_model_dir() if str(from_) == "bundled" else from_
     launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard)
-    path = finetune(model, corpus, out, set_, launch, resume=resume,
-                    stages=[s.strip() for s in stages.split(",") if s.strip()], log=typer.echo)
+    path = finetune(
+        model,
+        corpus,
+        out,
+        set_,
+        launch,
+        resume=resume,
+        stages=[s.strip() for s in stages.split(",") if s.strip()],
+        log=typer.echo,
+    )
     typer.echo(f"model written to {path}")
 
 

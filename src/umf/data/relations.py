@@ -194,7 +194,9 @@ def pair_closeness(joints: np.ndarray, a: int = 0, b: int = 1) -> dict[str, floa
     (and in metres); ``facing``: median cosine between a's facing and the direction to b,
     and b's to a, averaged (1: face to face); ``hands_m``: median nearest-wrists distance;
     ``min_joint_m``: the closest any two joints of the two bodies come (the inter-person
-    penetration reference: real partners keep this above a few centimetres)."""
+    penetration reference: real partners keep this above a few centimetres); ``closest_p05_m``
+    and ``pelvis_p05_m``: the 5th percentiles over frames of the closest-joints and pelvis
+    distances, what a clean-up may let generated partners come to."""
     j = np.asarray(joints, dtype=np.float64)
     size = 0.5 * (stature(j[a]) + stature(j[b]))
     wa, wb = j[a][:, [20, 21]], j[b][:, [20, 21]]
@@ -203,6 +205,8 @@ def pair_closeness(joints: np.ndarray, a: int = 0, b: int = 1) -> dict[str, floa
     pelvis = np.linalg.norm(d, axis=-1)
     unit = d / np.maximum(pelvis[:, None], 1e-8)
     face = 0.5 * ((facing_dirs(j[a]) * unit).sum(-1) + (facing_dirs(j[b]) * -unit).sum(-1))
+    pa, pb = j[a], j[b]  # closest joints frame by frame: (T, 22, 22) distances
+    closest = np.linalg.norm(pa[:, :, None] - pb[:, None], axis=-1).min((1, 2))
     return {
         "stature_m": round(size, 4),
         "hands_near": round(float((hands < 0.3 * size).mean()), 4),
@@ -210,7 +214,9 @@ def pair_closeness(joints: np.ndarray, a: int = 0, b: int = 1) -> dict[str, floa
         "pelvis": round(float(np.median(pelvis)) / size, 4),
         "pelvis_m": round(float(np.median(pelvis)), 4),
         "facing": round(float(np.median(face)), 4),
-        "min_joint_m": round(closest_joints(j[a], j[b])[0], 4),
+        "min_joint_m": round(float(closest.min()), 4),
+        "closest_p05_m": round(float(np.percentile(closest, 5)), 4),
+        "pelvis_p05_m": round(float(np.percentile(pelvis, 5)), 4),
     }
 
 

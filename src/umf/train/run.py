@@ -133,8 +133,9 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                                      caption_mix_from=t.caption_mix_from,
                                      **common)  # fmt: skip
         else:
-            ds = SceneDataset(corpus, split, normalizer,
-                              real_repeats=t.real_repeats if train else 1, **common)
+            ds = SceneDataset(
+                corpus, split, normalizer, real_repeats=t.real_repeats if train else 1, **common
+            )
         bank = None
         if vae is not None:
             passes = t.latent_passes if train else 1

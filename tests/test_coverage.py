@@ -1,0 +1,179 @@
+"""Coverage: a model's vocabulary, the score of a prompt, where it shows, touching takes."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+import torch
+from typer.testing import CliRunner
+
+from conftest import FakeText, prepare_fixture_corpus, save_tiny_model
+from umf.coverage import Vocabulary, build_vocabulary, embed, take_contacts
+
+
+class WordText(FakeText):
+    """Bag of words: prompts sharing words have similar pooled states (a stand-in for a
+    sentence encoder whose similarity means something)."""
+
+    def encode(self, texts):
+        import zlib
+
+        from umf.text import TextFeatures
+
+        pooled = torch.zeros(len(texts), self.dim)
+        for i, t in enumerate(texts):
+            for w in t.lower().replace(".", " ").split():
+                g = torch.Generator().manual_seed(zlib.crc32(w.encode()))
+                pooled[i] += torch.randn(self.dim, generator=g)
+        return TextFeatures(pooled[:, None], torch.ones(len(texts), 1, dtype=torch.bool), pooled)
+
+
+def _vocab(phrases, threshold=0.8, contact=None) -> Vocabulary:
+    enc = WordText()
+    return Vocabulary(list(phrases), embed(enc, phrases), "fake", threshold, contact=contact or {})
+
+
+def test_trained_captions_are_known_and_new_ones_are_not():
+    v = _vocab(["a person walks forward", "a person bows politely", "two people dance salsa"])
+    enc = WordText()
+    same, near, new = v.score(["a person bows politely", "a person walks forward slowly",
+                               "swim butterfly"], enc)  # fmt: skip
+    assert same["score"] == pytest.approx(1.0, abs=1e-4) and same["known"]
+    assert same["nearest"][0] == "a person bows politely"
+    assert near["nearest"][0] == "a person walks forward" and near["known"]
+    assert not new["known"] and new["score"] < 0.5
+    assert len(new["nearest"]) == 3
+
+
+def test_contact_comes_with_a_known_prompt_worded_like_a_touching_take():
+    touch = {"two people dance salsa": {"closest_m": 0.07, "pelvis_m": 0.29}}
+    v = _vocab(["a person walks forward", "two people dance salsa"], contact=touch)
+    salsa, walk, new = v.score(["two people dance salsa", "a person walks forward",
+                                "juggle balls"], WordText())  # fmt: skip
+    assert salsa["contact"] == touch["two people dance salsa"]
+    assert "contact" not in walk and "contact" not in new
+
+
+def test_vocabulary_round_trips_and_a_broken_one_is_one_line(tmp_path):
+    from umf.errors import UMFError
+
+    v = _vocab(
+        ["a person walks", "someone bows"],
+        contact={"someone bows": {"closest_m": 0.1, "pelvis_m": 0.3}},
+    )
+    v.actions, v.styles, v.relations = ["walk", "bow"], ["normal"], ["greet"]
+    v.save(tmp_path)
+    w = Vocabulary.load(tmp_path)
+    assert w.phrases == v.phrases and w.actions == ["walk", "bow"] and w.contact == v.contact
+    assert torch.allclose(w.embeddings, v.embeddings, atol=1e-3)  # stored in fp16
+    assert Vocabulary.load(tmp_path / "nothing") is None
+    doc = json.loads((tmp_path / "vocabulary.json").read_text())
+    doc["phrases"] = doc["phrases"][:1]
+    (tmp_path / "vocabulary.json").write_text(json.dumps(doc))
+    with pytest.raises(UMFError, match="do not match"):
+        Vocabulary.load(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def corpus(tmp_path_factory):
+    from umf.data.corpus import Corpus
+
+    root = prepare_fixture_corpus(tmp_path_factory.mktemp("cov") / "c", train_scenes=20,
+                                  val_scenes=4, test_scenes=4, test_groups=2)  # fmt: skip
+    return Corpus.load(root)
+
+
+def test_a_corpus_vocabulary_holds_its_train_captions_and_labels(corpus):
+    v = build_vocabulary(corpus, WordText(), "fake")
+    train = corpus.split_clips("train")
+    assert set(train[0].captions) <= set(v.phrases)
+    assert {c.meta["content"] for c in train} == set(v.actions)
+    assert set(v.relations) == {r["relation"] for r in corpus.scenes["train"]}
+    held_out = {t for c in corpus.split_clips("test") for t in c.captions} - {
+        t for c in train for t in c.captions
+    }
+    assert not held_out & set(v.phrases)  # only what training saw
+
+
+def test_touching_takes_give_their_closeness(real_joints):
+    from umf.data.clip import MotionClip
+
+    a = real_joints.numpy()[:60].astype(np.float32)
+    b = a.copy()
+    b[..., 0] += 0.4  # side by side, hands near
+    far = a.copy()
+    far[..., 0] += 3.0
+    clips = [
+        MotionClip("t", "mocap", np.stack([a, b]), ["two people hold hands"]),
+        MotionClip("f", "mocap", np.stack([a, far]), ["two people stand apart"]),
+    ]
+    got = take_contacts(clips)
+    assert list(got) == ["two people hold hands"]
+    assert got["two people hold hands"]["pelvis_m"] == pytest.approx(0.4, abs=1e-4)
+    assert 0.0 < got["two people hold hands"]["closest_m"] < 0.4
+
+
+def test_touching_prompts_are_separated_less_but_never_through_each_other(real_joints):
+    from umf.pipeline import touching_distances
+    from umf.separation import FIT_MARGIN, TOUCH_FLOOR, separate_people
+
+    a = real_joints.numpy()[:40].astype(np.float32)
+    b = a.copy()
+    b[..., 0] += 0.6  # side by side, arms' joints 10-20 cm apart: a couple, not strangers
+    scene = np.stack([a, b])
+    from umf.data.relations import closest_joints
+
+    assert 0.05 + FIT_MARGIN < closest_joints(a, b)[0] < 0.25
+    _, default = separate_people(scene)
+    _, close = separate_people(scene, **touching_distances({"closest_m": 0.05, "pelvis_m": 0.25}))
+    assert np.linalg.norm(default[1]) > 0.1 and np.abs(close).max() < 1e-6
+    d = touching_distances({"closest_m": 0.0, "pelvis_m": 0.0})
+    assert d["contact_distance"] == pytest.approx(TOUCH_FLOOR + FIT_MARGIN)
+    _, through = separate_people(np.stack([a, a]), **d)  # one body inside the other
+    assert np.linalg.norm(through[1]) > 0.1
+    assert touching_distances(None) == {}
+
+
+@pytest.fixture
+def covered_model(tmp_path, monkeypatch):
+    import umf.text
+
+    monkeypatch.setattr(umf.text, "build_text_encoder", lambda *a, **k: WordText())
+    model = save_tiny_model(tmp_path / "m")
+    _vocab(["a person walks forward", "a person bows politely"], threshold=0.8).save(model)
+    return model
+
+
+def test_scenes_npz_and_cli_carry_coverage(covered_model, tmp_path, one_thread):
+    from umf.cli.main import app
+    from umf.pipeline import UMFPipeline
+
+    pipe = UMFPipeline.from_pretrained(covered_model)
+    known, new = pipe(["a person walks forward", "juggle three balls"], num_people=1,
+                      seconds=1.0, fit=False)  # fmt: skip
+    assert known.meta["coverage"]["known"] and not new.meta["coverage"]["known"]
+    new.save_npz(tmp_path / "s.npz")
+    with np.load(tmp_path / "s.npz") as z:
+        assert json.loads(str(z["coverage"]))["nearest"] == new.meta["coverage"]["nearest"]
+    runner = CliRunner()
+    out = runner.invoke(app, ["generate", "juggle three balls", "--people", "1", "--seconds",
+                              "1", "--model", str(covered_model), "--out", str(tmp_path / "g"),
+                              "--format", "npz"])  # fmt: skip
+    assert out.exit_code == 0, out.output
+    assert out.stderr.count("umf: warning:") == 1 and "nearest known" in out.stderr
+    out = runner.invoke(app, ["generate", "a person walks forward", "--people", "1",
+                              "--seconds", "1", "--model", str(covered_model), "--out",
+                              str(tmp_path / "g2"), "--format", "npz"])  # fmt: skip
+    assert out.exit_code == 0 and "warning" not in out.stderr
+    info = runner.invoke(app, ["info", str(covered_model), "--prompt", "juggle three balls"])
+    assert info.exit_code == 0 and "NOT known" in info.stdout
+
+
+def test_a_model_without_vocabulary_still_generates(tmp_path, fake_text, one_thread):
+    from umf.pipeline import UMFPipeline
+
+    pipe = UMFPipeline.from_pretrained(save_tiny_model(tmp_path / "m"))
+    (scene,) = pipe("anything", num_people=1, seconds=1.0, fit=False)
+    assert "coverage" not in scene.meta
