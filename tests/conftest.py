@@ -87,6 +87,7 @@ class FakeText:
     dim = 384
     device = torch.device("cpu")
     identity = "fake-text"
+    name = "fake"
 
     def encode(self, texts: list[str]):
         import zlib
