@@ -9,9 +9,9 @@ import torch
 from conftest import BANDAI_FIXTURE, FakeText, save_tiny_model
 from test_mocap import _two_person_library
 
-STEPS = [f"train_{s}.{k}" for s in ("vae", "pflow", "sflow")
-         for k in ("max_steps=2", "batch_size=4", "val_every=2", "ckpt_every=2",
-                   "warmup_steps=1", "max_frames=60", "min_frames=30", "latent_passes=1")]  # fmt: skip
+SHORT = ("max_steps=2", "batch_size=4", "val_every=2", "ckpt_every=2", "warmup_steps=1",
+         "max_frames=60", "min_frames=30", "latent_passes=1")  # fmt: skip
+STEPS = [f"train_{s}.{k}" for s in ("vae", "pflow", "sflow") for k in SHORT]
 
 
 @pytest.fixture
