@@ -104,6 +104,17 @@ def test_an_unknown_skeleton_is_one_line_naming_skeleton_json(tmp_path):
         read_motion(tmp_path / "x.bvh")
 
 
+def test_a_mapping_that_collapses_a_bone_is_refused(tmp_path):
+    names = [f"j{i}" for i in range(22)]
+    joints = dict(zip(JOINT_NAMES, names, strict=True))
+    joints["neck"] = joints["spine3"]  # two of our joints on one of theirs
+    (tmp_path / "x.bvh").write_text(star_bvh(names, _layout(names), np.zeros((4, 3))))
+    (tmp_path / "skeleton.json").write_text(json.dumps({"joints": joints}))
+    problems: list = []
+    assert list(load_mocap(tmp_path, problems)) == []
+    assert "puts neck and spine3 at one point" in problems[0][1]
+
+
 def test_skeleton_json_maps_any_skeleton_and_sets_unit_and_fps(tmp_path):
     names = [f"j{i}" for i in range(22)]
     off = _layout(names)

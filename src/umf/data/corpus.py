@@ -45,7 +45,7 @@ from umf.rotations import matrix_to_6d
 
 FORMAT = "umf-corpus"
 FORMAT_VERSION = 1
-CACHE_VERSION = 3  # bump when the per-source conversion changes
+CACHE_VERSION = 4  # bump when the per-source conversion changes
 SPLITS = ("train", "val", "test")
 BANDAI_ATTRIBUTION = (
     "Bandai-Namco-Research-Motiondataset, (c) 2022 Bandai Namco Research Inc., CC BY-NC 4.0; "

@@ -95,7 +95,24 @@ def read_motion(path: Path, skeleton: SkeletonMap | None = None) -> RawMotion:
         raise UMFError(f"{path}: implausible frame rate {raw.fps:g} fps")
     if raw.joints.shape[0] < 2:
         raise UMFError(f"{path}: fewer than 2 frames")
+    check_bones(raw.joints, str(path))
     return raw
+
+
+def check_bones(joints: np.ndarray, label: str) -> None:
+    """A mapping that puts two connected SMPL joints at one point (a bone of no length) gives
+    a body no rigid skeleton or rotation can describe: one line naming the two joints."""
+    from umf.data.skeletons import body_span
+    from umf.skeleton import JOINT_NAMES, PARENTS
+
+    span = body_span(joints)
+    for k, p in enumerate(PARENTS):
+        if (
+            p >= 0
+            and np.median(np.linalg.norm(joints[:, k] - joints[:, p], axis=-1)) < 0.005 * span
+        ):
+            raise UMFError(f"{label}: the mapping puts {JOINT_NAMES[k]} and {JOINT_NAMES[p]} at "
+                           "one point; map them to different joints (skeleton.json)")  # fmt: skip
 
 
 def _read_bvh(text: str, path: Path, skeleton: SkeletonMap | None) -> RawMotion:
