@@ -78,3 +78,31 @@ def test_real_takes_repeat_in_scene_batches(library_corpus):
     assert len(ids) == 1
     starts = {many[i]["start"] for i in range(len(many)) if many.items[i][0] == "clip"}
     assert len(starts) > 1  # each repeat draws its own crop
+
+
+def test_restating_the_body_statistics_keeps_the_vae_function(one_thread):
+    """New body-frame statistics, absorbed by the projections: encoder means and decoded
+    features unchanged for clips of whole tokens, and the buffers hold the new ones."""
+    from conftest import tiny_config
+    from umf.body_frame import BODY_DIM
+    from umf.models.vae import MotionVAE
+    from umf.representation import Normalizer
+
+    torch.manual_seed(0)
+    cfg = tiny_config().vae
+    vae = MotionVAE(cfg).eval()
+    vae.set_normalizers(
+        Normalizer(torch.randn(262) * 0.1, torch.rand(262) + 0.5),
+        Normalizer(torch.randn(BODY_DIM) * 0.1, torch.rand(BODY_DIM) + 0.5),
+    )
+    k = cfg.frames_per_token
+    x = torch.randn(3, 10 * k, 262)
+    mask = torch.ones(3, 10 * k, dtype=torch.bool)
+    mu, _ = vae.encode(x, mask)
+    out = vae.decode(mu, mask)
+    new = Normalizer(torch.randn(BODY_DIM), torch.rand(BODY_DIM) * 3 + 0.2)
+    vae.restate_body(new)
+    mu2, _ = vae.encode(x, mask)
+    assert torch.allclose(mu2, mu, atol=1e-4)
+    assert torch.allclose(vae.decode(mu2, mask), out, atol=1e-3 * float(out.abs().max()))
+    assert torch.equal(vae.body_std, new.std) and torch.equal(vae.body_mean, new.mean)

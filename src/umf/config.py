@@ -263,6 +263,11 @@ class TrainConfig:
     # crop, beside the composed scenes: a dozen real takes among 3,000 composed scenes are
     # otherwise seen in a fraction of a percent of the batches
     real_repeats: int = 1
+    # VAE fine-tuned with --init: refit the body-frame statistics on this corpus (balanced as
+    # training draws it) and restate the VAE's weights so it computes the same function
+    # (umf.models.vae.MotionVAE.restate_body): a library of motions the model never saw (a
+    # crawl, a backflip) is then a few deviations from the mean instead of tens
+    refit_body: bool = False
 
 
 @dataclass

@@ -197,6 +197,32 @@ class MotionVAE(nn.Module):
             self.body_mean.copy_(body.mean)
             self.body_std.copy_(body.std)
 
+    @torch.no_grad()
+    def restate_body(self, body: Normalizer) -> None:
+        """Adopt new body-frame statistics without changing what the VAE computes.
+
+        A VAE trained on people who stand sees a crawl's pelvis height 25 standard
+        deviations from its mean, further than fine-tuning at a safe learning rate can
+        teach the decoder to reach. New statistics (fitted on the new corpus) put it a few
+        deviations out, and the input and output projections absorb the change exactly:
+        with ``y_old = a * y_new + c`` (a = s'/s, c = (m' - m)/s per dimension),
+        ``in_proj`` becomes ``W diag(a)`` with bias ``b + W c`` and ``out_proj`` returns
+        ``(out - c) / a``. Exact for every token whose frames are all real; a token that
+        straddles the end of a clip reads its zero padding as the new mean instead of the old.
+        """
+        if not self.body:
+            raise ValueError("restate_body needs vae.target='body'")
+        k = self.cfg.frames_per_token
+        a = (body.std.to(self.body_std) / self.body_std).repeat(k)
+        c = ((body.mean.to(self.body_mean) - self.body_mean) / self.body_std).repeat(k)
+        w = self.in_proj.weight
+        self.in_proj.bias.add_(w @ c)
+        w.mul_(a[None, :])
+        self.out_proj.weight.div_(a[:, None])
+        self.out_proj.bias.sub_(c).div_(a)
+        self.body_mean.copy_(body.mean)
+        self.body_std.copy_(body.std)
+
     def to_space(self, x: Tensor) -> Tensor:
         """Normalised 262-d features -> the normalised features the VAE models."""
         if not self.body:

@@ -166,17 +166,24 @@ def bank_device(launch: Launch) -> str:
     return "cuda" if wants_gpu and torch.cuda.is_available() else "cpu"
 
 
-def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, seed: int = 0):
+def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, seed: int = 0,
+                    balance: float = 0.0):  # fmt: skip
     """Body-frame statistics (:func:`umf.body_frame.fit_body_normalizer`) of train clips.
 
     Clips are visited in a seeded order until ``max_frames`` frames are seen; the
     trajectory slots account for the random placement of VAE training within ``radius``.
+    ``balance``: clips of rare content labels count as often as training draws them
+    (``train_*.balance_labels``, :func:`umf.train.datasets.label_repeats`).
     """
     import numpy as np
 
     from umf.body_frame import fit_body_normalizer
+    from umf.train.datasets import label_repeats
 
     clips = corpus.split_clips("train")
+    if balance:
+        repeats = label_repeats([c.meta.get("content") for c in clips], balance)
+        clips = [c for c, r in zip(clips, repeats, strict=True) for _ in range(r)]
     feats, seen = [], 0
     for i in np.random.default_rng(seed).permutation(len(clips)):
         f = torch.from_numpy(corpus.clip_features(clips[i]))
@@ -364,7 +371,7 @@ def train_stage(
         check_labels(corpus, t.labels)
     if stage == "vae" and t.decoder_only and init is None and not resuming:
         raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
-    if stage == "vae" and init is not None and not t.decoder_only:
+    if stage == "vae" and init is not None and not t.decoder_only and not own_vae:
         log(f"vae: the encoder trains too, so the latents change; the flows of {init} know "
             "the old ones: retrain them (or set train_vae.decoder_only=true)")  # fmt: skip
     torch.manual_seed(t.seed)
@@ -412,6 +419,14 @@ def train_stage(
         if fresh and latents is not None:
             module.latent_norm.fit_detail(latents)
         log(f"{stage}: starting from the weights of {init}")
+        if stage == "vae" and t.refit_body and cfg.vae.target == "body":
+            from umf.train.datasets import PLACEMENT_RADIUS
+
+            st.vae.restate_body(body_normalizer(corpus, PLACEMENT_RADIUS, balance=t.balance_labels))
+            log(
+                "vae: body-frame statistics refitted on this corpus (the weights restated "
+                "to compute the same function: umf.models.vae.MotionVAE.restate_body)"
+            )
     log(f"training {stage}: {sum(p.numel() for p in st.trainable().parameters()):,} parameters")
     return train(
         st, train_loader, val_loader, t, run_dir / stage,
@@ -464,7 +479,7 @@ def export_model(
 FINETUNE: tuple[str, ...] = (
     "train_vae.decoder_only=false", "train_vae.lr=0.0001", "train_vae.warmup_steps=20",
     "train_vae.max_steps=300", "train_vae.balance_labels=0.5", "train_vae.real_repeats=40",
-    "train_vae.val_every=100", "train_vae.ckpt_every=50",
+    "train_vae.val_every=100", "train_vae.ckpt_every=50", "train_vae.refit_body=true",
     "train_pflow.lr=0.0001", "train_pflow.max_steps=500", "train_pflow.balance_labels=0.5",
     "train_pflow.real_repeats=40", "train_pflow.latent_passes=2", "train_pflow.val_every=250",
     "train_pflow.ckpt_every=50",
