@@ -10,8 +10,9 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").glob("*.md")),
-         ROOT / "src" / "umf" / "assets" / "model" / "README.md", ROOT / "data" / "mocap" / "README.md"]  # fmt: skip
+CARD = ROOT / "src" / "umf" / "assets" / "model" / "README.md"
+PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").glob("*.md")), CARD,
+         ROOT / "data" / "mocap" / "README.md"]  # fmt: skip
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 
 
