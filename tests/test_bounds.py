@@ -1,0 +1,115 @@
+"""The documented top and bottom bounds are accepted, one step past them refused.
+
+A bound written ``<`` instead of ``<=`` refuses the very value the README documents
+(``--people 16``, ``--seed 2^64-1``, ``--sflow-steps 200``): these catch it.
+"""
+
+from __future__ import annotations
+
+import pytest
+
+from umf.errors import UMFError
+from umf.validation import (
+    MAX_BATCH,
+    MAX_FLOW_STEPS,
+    MAX_GUIDANCE,
+    MAX_PEOPLE,
+    MAX_SECONDS,
+    MAX_SEED,
+    MIN_SECONDS,
+    check_batch,
+    check_float,
+    check_int,
+    check_request,
+)
+
+
+def test_the_documented_bounds():
+    assert (MAX_PEOPLE, MAX_SECONDS, MIN_SECONDS, MAX_SEED) == (16, 10.0, 0.5, 2**64 - 1)
+    assert (MAX_GUIDANCE, MAX_FLOW_STEPS, MAX_BATCH) == (20.0, 200, 256)
+
+
+@pytest.mark.parametrize(
+    ("field", "edge", "past"),
+    [("num_people", 16, 17), ("num_people", 1, 0), ("seconds", 10.0, 10.01),
+     ("seconds", 0.5, 0.49), ("seed", 2**64 - 1, 2**64), ("seed", 0, -1),
+     ("guidance", 20.0, 20.01), ("guidance", 0.0, -0.01), ("sflow_steps", 200, 201),
+     ("sflow_steps", 1, 0), ("pflow_steps", [200], [201]), ("pflow_steps", [100, 100], [100, 101]),
+     ("pflow_steps", [1, 1], [1, 0])],
+)  # fmt: skip
+def test_edges_are_accepted_and_one_past_refused(field, edge, past):
+    req = check_request("a person walks", **{field: edge})
+    assert req is not None
+    with pytest.raises(UMFError):
+        check_request("a person walks", **{field: past})
+
+
+def test_batch_edges():
+    assert check_batch(256, 1) == 256 and check_batch(1, 256) == 1
+    for batch, prompts in ((257, 1), (0, 1), (2, 129)):
+        with pytest.raises(UMFError):
+            check_batch(batch, prompts)
+
+
+def test_primitive_checks_are_inclusive_and_say_so():
+    assert check_int("n", 5, 1, 5) == 5 and check_int("n", 1, 1, 5) == 1
+    assert check_float("x", 2.5, 0.0, 2.5) == 2.5
+    with pytest.raises(UMFError, match="between 1 and 5, got 6"):
+        check_int("n", 6, 1, 5)
+    with pytest.raises(UMFError, match="integer"):
+        check_int("n", True, 0, 5)
+
+
+@pytest.fixture
+def tiny_model(tmp_path, fake_text, one_thread):
+    from conftest import save_tiny_model
+
+    return save_tiny_model(tmp_path / "m")
+
+
+def test_actor_person_picks_that_person(tmp_path, tiny_model):
+    """--actor-person K: person 1 of the reaction is person K of the file, not person 1."""
+    import numpy as np
+    from typer.testing import CliRunner
+
+    from conftest import BANDAI_FIXTURE
+    from umf.cli.main import app
+    from umf.data.motion_file import load_motion
+
+    data = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data"
+    bow = load_motion(data / "dataset-1_bow_normal_001.bvh").joints[0, :40]
+    walk = load_motion(data / "dataset-1_walk_normal_001.bvh").joints[0, :40]
+    walk = walk + np.array([2.0, 0.0, 0.0], np.float32)
+    np.savez(tmp_path / "two.npz", joints=np.stack([bow, walk]))
+    got = {}
+    for k in (1, 2):
+        out = tmp_path / f"r{k}"
+        r = CliRunner().invoke(app, ["react", "two people", "--actor", str(tmp_path / "two.npz"),
+                                     "--actor-person", str(k), "--model", str(tiny_model),
+                                     "--out", str(out), "--format", "npz"])  # fmt: skip
+        assert r.exit_code == 0, r.output
+        (npz,) = out.glob("*.npz")
+        with np.load(npz) as z:
+            got[k] = z["joints"][0]
+    t = got[1].shape[0]
+    assert t >= 39
+    assert np.abs(got[1] - bow[:t]).max() < 0.02 and np.abs(got[2] - walk[:t]).max() < 0.02
+    assert np.abs(got[1] - got[2]).max() > 1.0
+
+
+def test_guidance_changes_the_scene(tiny_model):
+    """--guidance reaches both flows: another scale, another scene (same seed)."""
+    import numpy as np
+
+    from umf.pipeline import UMFPipeline
+
+    pipe = UMFPipeline.from_pretrained(tiny_model)
+    torch = pytest.importorskip("torch")
+    for m in (pipe.pflow, pipe.sflow):  # untrained conditional branches would be equal
+        for p in m.parameters():
+            p.data += 0.05 * torch.randn_like(p)
+    a, b, a2 = (pipe("a person walks", num_people=2, seconds=1.0, seed=3, guidance=g, fit=False)[0]
+                for g in (0.0, 5.0, 0.0))  # fmt: skip
+    assert np.array_equal(a.joints, a2.joints)
+    assert np.abs(a.joints[0] - b.joints[0]).max() > 1e-3  # P-Flow: person 1
+    assert np.abs(a.joints[1] - b.joints[1]).max() > 1e-3
