@@ -3,7 +3,9 @@
 The bundled model was made in steps across several sessions (a VAE and both flows on one
 GPU, then fine-tunes on a CPU; each step has a results page). This runs the same steps
 in order, with the options those pages and the shipped ``config.json`` record, into
-``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``:
+``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
+(the last stage, ``teach``, needs the full corpus of ``make corpus`` with ``../shared``:
+Bandai and the CMU and DeepMimic mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -37,7 +39,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261127c"
+NAME = "umf-small-bandai-20261202"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -85,6 +87,14 @@ PFLOW_MIX = dict(**EXTEND, respell_captions=True, caption_mix=0.5, caption_mix_w
                  caption_mix_from=["style=normal"], lr=0.0002, warmup_steps=20, max_steps=1500,
                  batch_size=128, ema_decay=0.99, latent_passes=4, ckpt_every=250,
                  val_every=500, num_workers=0)  # fmt: skip
+
+
+# results/umf-small-bandai-20261202: taught the real mocap (CMU salsa and handshake takes,
+# DeepMimic) with `umf train finetune` (its FINETUNE defaults, then these); needs the full
+# corpus (`make corpus` with ../shared, which adds the mocap libraries)
+TEACH = [*sets("train_vae", max_steps=600, real_repeats=60),
+         *sets("train_pflow", max_steps=2000, real_repeats=60),
+         *sets("train_sflow", max_steps=2000, real_repeats=60)]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -153,7 +163,11 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(Stage("dec", [*dec, export("dec", m["hg"], m["dec"])], {}))
     mix = finetune("pflow", "mix", m["dec"], sets("train_pflow", **PFLOW_MIX))
     out.append(Stage("mix", [*mix, export("mix", m["dec"], m["mix"])], {}))
-    out.append(variant("name", m["mix"], work / "model", "--name", NAME))
+    teach = work / "runs" / "teach"
+    out.append(Stage("teach", [[*umf, "train", "finetune", "--from", str(m["mix"]), *c, "--out",
+                                str(teach), *TEACH, *cut("vae", "pflow", "sflow"),
+                                *(["--resume"] if teach.exists() else [])]], {}))  # fmt: skip
+    out.append(variant("name", teach / "model", work / "model", "--name", NAME))
     return out
 
 

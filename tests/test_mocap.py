@@ -377,3 +377,31 @@ def test_the_worked_example_library_reads_back_what_it_was_made_from(tmp_path):
     assert np.abs(bow.joints[0] - want).max() < 2e-4  # FK of the written rig, to 0.2 mm
     take = clips["call-and-answer"]
     assert take.num_people == 2 and take.meta["measured"]["pairs"]["1-2"]["facing"] > 0.9
+
+
+def test_prepare_never_destroys_a_corpus_that_worked(tmp_path, monkeypatch):
+    """A truncated conversion cache is rebuilt (saying so), and a prepare that fails
+    part-way leaves the previous corpus whole and loadable."""
+    import umf.data.corpus as corpus_mod
+    from conftest import BANDAI_FIXTURE
+    from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+
+    cfg = PrepareConfig(train_scenes=8, val_scenes=2, test_scenes=2, test_groups=1)
+    out = tmp_path / "c"
+    prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=lambda s: None)
+    before = (out / "clips.json").read_text()
+    (cache,) = (out / "cache").glob("bandai-*.npz")
+    cache.write_bytes(cache.read_bytes()[:1000])  # truncated
+    logs: list[str] = []
+    prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=logs.append)
+    assert any("unreadable" in m for m in logs)
+    assert (out / "clips.json").read_text() == before
+
+    def boom(*a, **k):
+        raise RuntimeError("disk on fire")
+
+    monkeypatch.setattr(corpus_mod, "fit_normalizer", boom)
+    with pytest.raises(RuntimeError):
+        prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=lambda s: None)
+    assert len(Corpus.load(out).clips) == len(json.loads(before))  # the old one, whole
+    assert not list(out.glob(".staging-*"))

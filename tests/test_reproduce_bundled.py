@@ -28,10 +28,15 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     # each stage's model is the next one's --init (or source), so configs carry over; the
     # P-Flow fine-tune "hg" is not in the chain of configs: the decoder stage starts from the
     # S-Flow's model and takes hg's P-Flow as its export --base (as the release did)
-    chain = ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "dec", "mix"]
+    chain = ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "dec", "mix", "teach"]
     cfg = family_config("small")
     for name in chain:
         command = stages[name][0]
+        if "finetune" in command:  # umf train finetune applies its defaults first
+            from umf.train.run import FINETUNE
+
+            for o in FINETUNE:
+                cfg = set_option(cfg, o)
         for i, arg in enumerate(command):
             if arg == "--set":
                 cfg = set_option(cfg, command[i + 1])
@@ -57,7 +62,11 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     # the model_variant stages, which refuse an existing destination, replace one left by a kill
     writes = {st.name: st.writes for st in rb.stages(tmp_path, Path("out/corpus")) if st.writes}
     assert writes == {"sampling": models / "sampling", "name": tmp_path / "model"}
-    assert stages["name"][0][2:4] == [str(models / "mix"), str(tmp_path / "model")]
+    teach = stages["teach"][0]
+    assert teach[teach.index("--from") + 1] == str(models / "mix")
+    run = tmp_path / "runs" / "teach"
+    assert teach[teach.index("--out") + 1] == str(run)
+    assert stages["name"][0][2:4] == [str(run / "model"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
 

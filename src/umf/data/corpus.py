@@ -17,9 +17,12 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import re
+import shutil
 import time
 import warnings
+import zipfile
 from collections.abc import Callable, Iterable, Iterator
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -167,16 +170,19 @@ def load_source(
     cache_dir: Path,
     problems: list[tuple[str, str]],
     progress: bool = True,
+    log: Callable[[str], None] = print,
 ) -> tuple[list[MotionClip], bool]:
     """Clips of one source, converted once and cached; returns (clips, reused_cache)."""
     cache = cache_dir / f"{name}-{_fingerprint(path)}.npz"
     if cache.exists():
         try:
             clips = _load_clips(cache)
-            problems.extend(_load_skipped(cache))
+            skipped = _load_skipped(cache)
+            problems.extend(skipped)
             return clips, True
-        except (OSError, ValueError, KeyError, json.JSONDecodeError):
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile):
             cache.unlink(missing_ok=True)  # a broken cache is rebuilt, never trusted
+            log(f"{cache}: conversion cache unreadable (truncated?); converting {name} again")
     clips: list[MotionClip] = []
     found: list[tuple[Any, str]] = []
     with warnings.catch_warnings():  # skipped items are reported once, by the caller
@@ -429,15 +435,20 @@ def prepare_corpus(
     check_prepare_config(config)
     t0 = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
-    # the manifest marks a complete corpus: remove it first, write it last, so a run that
-    # dies in between leaves no corpus that loads with files of two different runs
-    (out / "manifest.json").unlink(missing_ok=True)
+    # a corpus that worked keeps working until the new one is complete: every file is
+    # written into a staging folder and moved into place at the end, the manifest last
+    stage = out / f".staging-{os.getpid()}"
+    shutil.rmtree(stage, ignore_errors=True)
+    for old in out.glob(".staging-*"):  # left by a killed run
+        shutil.rmtree(old, ignore_errors=True)
     cache_dir = out / "cache"
     problems: list[tuple[str, str]] = []
     clips: list[MotionClip] = []
     source_info = []
     for name, path in sources.items():
-        got, reused = load_source(name, Path(path), loader_of(name), cache_dir, problems, progress)
+        got, reused = load_source(
+            name, Path(path), loader_of(name), cache_dir, problems, progress, log
+        )
         clips.extend(got)
         info = {"name": name, "path": str(path), "clips": len(got), "reused_cache": reused}
         if Path(path).is_dir():  # a library's terms travel with it (LICENSE*, README*)
@@ -480,6 +491,22 @@ def prepare_corpus(
         config.normalizer_max_frames, config.seed,
     )  # fmt: skip
 
+    stage.mkdir()
+    try:
+        manifest = _write_corpus(
+            stage, clips, scenes, normalizer, config, source_info, problems, t0
+        )
+        for f in ("clips.npz", "clips.json", "scenes.json", "normalizer.safetensors",
+                  "manifest.json"):  # fmt: skip
+            os.replace(stage / f, out / f)
+    finally:
+        shutil.rmtree(stage, ignore_errors=True)
+    return manifest
+
+
+def _write_corpus(out: Path, clips, scenes, normalizer, config, source_info, problems,
+                  t0: float) -> dict[str, Any]:  # fmt: skip
+    """Every file of a corpus into ``out``; returns the manifest."""
     _save_clips(out / "clips.npz", clips)
     write_json_atomic(out / "clips.json", [
         {"id": c.id, "source": c.source, "split": c.split, "captions": c.captions,
@@ -507,7 +534,12 @@ def prepare_corpus(
         },
         "seconds": round(time.perf_counter() - t0, 1),
         "license": "Derived from CC BY-NC 4.0 data where the source is Bandai: "
-        + BANDAI_ATTRIBUTION,
+        + BANDAI_ATTRIBUTION
+        + (
+            "; mocap libraries under their own terms (each source's license_files)"
+            if any(s["name"].startswith("mocap") for s in source_info)
+            else ""
+        ),
         "created": time.strftime("%Y-%m-%dT%H:%M:%S%z"),
     }
     write_json_atomic(out / "manifest.json", manifest)
