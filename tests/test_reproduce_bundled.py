@@ -125,7 +125,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
-                     "mix", "name"]  # fmt: skip
+                     "mix", "teach", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
