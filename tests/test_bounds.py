@@ -113,3 +113,15 @@ def test_guidance_changes_the_scene(tiny_model):
     assert np.array_equal(a.joints, a2.joints)
     assert np.abs(a.joints[0] - b.joints[0]).max() > 1e-3  # P-Flow: person 1
     assert np.abs(a.joints[1] - b.joints[1]).max() > 1e-3
+
+
+def test_a_step_total_below_the_stage_count_and_a_lone_surrogate_are_one_line():
+    from conftest import tiny_config
+    from umf.validation import check_for_model
+
+    cfg = tiny_config()  # a two-stage pyramid
+    with pytest.raises(UMFError, match="fewer than this model's 2 pyramid stages"):
+        check_for_model(check_request("a person walks", pflow_steps=1), cfg)
+    assert check_for_model(check_request("a person walks", pflow_steps=2), cfg) > 0
+    with pytest.raises(UMFError, match="not valid text"):
+        check_request("a person \ud800 walks")

@@ -93,3 +93,22 @@ def test_bad_arrays(tmp_path):
         load_motion(tmp_path / "none.npz")
     with pytest.raises(UMFError, match="not found"):
         load_motion(tmp_path / "missing.bvh")
+
+
+def test_npz_in_centimetres_is_converted_and_empty_ones_refused(real_joints, tmp_path):
+    joints = real_joints.numpy()[:40].astype(np.float32)
+    np.savez(tmp_path / "cm.npz", joints=joints * 100)
+    m = load_motion(tmp_path / "cm.npz")
+    assert m.meta["converted_from"] == "cm" and np.abs(m.joints[0] - joints).max() < 1e-4
+    np.savez(tmp_path / "none.npz", joints=np.zeros((0, 10, 22, 3), np.float32))
+    with pytest.raises(UMFError, match="no motion"):
+        load_motion(tmp_path / "none.npz")
+
+
+def test_an_api_actor_in_centimetres_is_one_line(real_joints):
+    from umf.validation import check_actor
+
+    joints = real_joints.numpy()[:40]
+    assert check_actor(joints, 30.0, 300) is joints
+    with pytest.raises(UMFError, match="in cm, not metres"):
+        check_actor(joints * 100, 30.0, 300)

@@ -90,6 +90,12 @@ def check_prompts(prompts: Any) -> tuple[str, ...]:
             raise UMFError("the prompt is empty")
         if len(p) > MAX_PROMPT_CHARS:
             raise UMFError(f"a prompt may have at most {MAX_PROMPT_CHARS} characters, got {len(p)}")
+        try:
+            p.encode("utf-8")
+        except UnicodeEncodeError:  # a lone surrogate ("\ud800"): no tokenizer takes it
+            raise UMFError(
+                f"the prompt is not valid text (unpaired surrogate in {p!r:.60})"
+            ) from None
     return tuple(prompts)
 
 
@@ -156,6 +162,9 @@ def check_for_model(req: Request, config: Any, acting: bool = False) -> int:
             f"--steps needs {stages} count(s) for this model's {stages}-stage pyramid "
             f"(coarse to fine), got {len(req.pflow_steps)}"
         )
+    if req.pflow_steps is not None and len(req.pflow_steps) == 1 and req.pflow_steps[0] < stages:
+        raise UMFError(f"--steps {req.pflow_steps[0]} in total is fewer than this model's "
+                       f"{stages} pyramid stages (at least one step each)")  # fmt: skip
     if acting:
         return 0
     frames = round(req.seconds * config.fps)
@@ -226,6 +235,12 @@ def check_actor(actor: Any, fps: float, max_frames: int) -> np.ndarray:
         raise UMFError(
             f"the actor motion spans only {extent:.3f} m: not a body (all joints at one point?)"
         )
+    from umf.data.skeletons import choose_unit
+
+    unit, name = choose_unit(actor)
+    if name not in ("m", "stature"):  # a body of an adult's size in another unit
+        raise UMFError(f"the actor motion looks like it is in {name}, not metres (a body "
+                       f"{1 / unit:g} times too large): multiply it by {unit:g}")  # fmt: skip
     return actor
 
 

@@ -15,6 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
+from umf.data.skeletons import choose_unit
 from umf.errors import UMFError
 from umf.scene import Scene
 
@@ -67,9 +68,16 @@ def load_motion(path: str | Path) -> Scene:
         (joints, fps), text = _load_bvh(path), ""
     else:
         raise UMFError(f"{path}: unsupported motion file (use .bvh or .npz)")
+    if joints.shape[0] == 0 or joints.shape[1] < 2:
+        raise UMFError(f"{path}: no motion ({joints.shape[0]} people, {joints.shape[1]} frames)")
     if not np.isfinite(joints).all():
         raise UMFError(f"{path}: the motion contains NaN or infinite values")
     if not 1.0 <= fps <= 1000.0:
         raise UMFError(f"{path}: implausible frame rate {fps:g} fps")
+    meta = {"source_fps": fps, "source": str(path)}
+    if path.suffix.lower() == ".npz":  # metres by the format; an adult's size says otherwise
+        unit, name = choose_unit(joints)
+        if name not in ("m", "stature"):
+            joints, meta["converted_from"] = joints * unit, name
     joints = resample(np.ascontiguousarray(joints, dtype=np.float32), fps, FPS)
-    return Scene(joints, None, text, FPS, meta={"source_fps": fps, "source": str(path)})
+    return Scene(joints, None, text, FPS, meta=meta)
