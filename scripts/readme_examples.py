@@ -28,6 +28,9 @@ EXAMPLES = [
     ("call_approach", "One person calls out and the other walks over to them.", 2, 4.0),
     ("group_line", "Three people walk side by side.", 3, 4.0),
     ("gather", "A person calls and four people walk over to them.", 5, 4.0),
+    ("salsa", "Two people dance salsa together.", 2, 4.0),  # real CMU takes
+    ("backflip", "A person does a backflip.", 1, 4.0),  # DeepMimic
+    ("crawl", "A person crawls on hands and knees.", 1, 4.0),
 ]
 FRAMES = 5  # evenly spaced frames per strip
 # (file name, example it shows again, frames): close strips seen from the front

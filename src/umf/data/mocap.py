@@ -302,7 +302,8 @@ def load_mocap(
         except UMFError as exc:
             if problems is None or (is_take and "different" in str(exc)):
                 raise
-            problems.append((str(lib.root / key), str(exc).splitlines()[0]))
+            where, reason = str(lib.root / key), str(exc).splitlines()[0]
+            problems.append((where, reason.removeprefix(f"{where}: ")))
             continue
         if key not in lib.captions and problems is not None:
             problems.append((str(lib.root / key), f"no caption in captions.csv: captioned "
