@@ -27,6 +27,8 @@ def request(base: str, path: str, body=None, method=None, headers=None, raw: byt
     """(status, headers, bytes) of one request; errors are answers too."""
     data = raw if raw is not None else None if body is None else json.dumps(body).encode()
     hdrs = {"Content-Type": "application/json"} if body is not None else {}
+    if raw is not None and path.startswith("/api/upload"):  # what the page sends
+        hdrs = {"Content-Type": "application/octet-stream"}
     req = urllib.request.Request(
         base + path, data=data, method=method, headers=hdrs | (headers or {})
     )

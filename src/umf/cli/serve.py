@@ -16,7 +16,8 @@ from umf.errors import UMFError
 HOST_HELP = "Address to listen on; keep 127.0.0.1 unless you mean to share the page."
 
 
-def _app(loader: Callable[[], Any] | None, pipeline: Any = None, verbose: bool = False):
+def _app(loader: Callable[[], Any] | None, pipeline: Any = None, verbose: bool = False,
+         allowed_hosts: Sequence[str] = (), allowed_origins: Sequence[str] = ()):  # fmt: skip
     """The app, refusing to start without three.js (one line says what to install)."""
     from umf.serve.scenes import ModelHolder
     from umf.serve.server import App, find_three, three_missing_message
@@ -24,7 +25,13 @@ def _app(loader: Callable[[], Any] | None, pipeline: Any = None, verbose: bool =
     three = find_three()
     if three is None:
         raise UMFError(three_missing_message())
-    return App(ModelHolder(loader, pipeline), three, verbose=verbose)
+    return App(
+        ModelHolder(loader, pipeline),
+        three,
+        verbose=verbose,
+        allowed_hosts=tuple(allowed_hosts),
+        allowed_origins=tuple(allowed_origins),
+    )
 
 
 def _loader(model: Path | None) -> Callable[[], Any]:
@@ -52,11 +59,22 @@ def run_server(app: Any, host: str, port: int, open_browser: bool) -> None:
     sys.stdout.flush()
     if open_browser and _has_display():
         webbrowser.open(url)
+    import signal
+
+    def stop(signum: int, frame: Any) -> None:  # SIGTERM (systemd, docker, kill): as Ctrl+C
+        raise KeyboardInterrupt
+
+    import threading
+
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, stop) if main else None
     try:
         server.serve_forever()
     except KeyboardInterrupt:
         typer.echo("umf serve: stopped")
     finally:
+        if main:
+            signal.signal(signal.SIGTERM, previous)
         server.server_close()
         app.close()
 
@@ -74,9 +92,16 @@ def serve(
     port: int = typer.Option(8000, help="Port (0: any free port; the address is printed)."),
     open_browser: bool = typer.Option(False, "--open/--no-open", help="Open a browser."),
     verbose: bool = typer.Option(False, "--verbose", help="Log every request to stderr."),
-) -> None:
+    allowed_host: list[str] = typer.Option([], "--allowed-host", help="A host name the page "
+                                           "may be reached by besides loopback and --host "
+                                           "(repeatable; for --host 0.0.0.0)."),
+    allow_origin: list[str] = typer.Option([], "--allow-origin", help="Another web origin "
+                                           "(scheme://host:port) allowed to POST (repeatable)."),
+) -> None:  # fmt: skip
     """A local web page: type a prompt, see the scene in 3-D, download its files."""
-    app = _app(_loader(model), verbose=verbose)
+    app = _app(
+        _loader(model), verbose=verbose, allowed_hosts=allowed_host, allowed_origins=allow_origin
+    )
     app.model.start()  # load while the user types
     run_server(app, host, port, open_browser)
 

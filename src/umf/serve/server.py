@@ -20,6 +20,7 @@ import ipaddress
 import json
 import mimetypes
 import os
+import re
 import sys
 import tempfile
 import threading
@@ -79,7 +80,10 @@ class App:
     """State shared by all requests: model, scenes, uploads, where three.js is."""
 
     def __init__(self, model: ModelHolder, three: Path | None, workdir: Path | None = None,
-                 verbose: bool = False) -> None:  # fmt: skip
+                 verbose: bool = False, allowed_hosts: tuple[str, ...] = (),
+                 allowed_origins: tuple[str, ...] = ()) -> None:  # fmt: skip
+        self.allowed_hosts = tuple(h.lower() for h in allowed_hosts)
+        self.allowed_origins = tuple(allowed_origins)
         self.model = model
         self.three = three
         self._tmp = None if workdir else tempfile.TemporaryDirectory(prefix="umf-serve-")
@@ -194,9 +198,30 @@ class Handler(BaseHTTPRequestHandler):
     def do_DELETE(self) -> None:
         self._dispatch("DELETE")
 
+    def do_PATCH(self) -> None:
+        self._dispatch("PATCH")
+
+    def do_OPTIONS(self) -> None:  # no CORS preflight is ever granted: one JSON line
+        self._dispatch("OPTIONS")
+
+    def do_HEAD(self) -> None:
+        self.close_connection = True  # the JSON error's body follows a HEAD: end there
+        self._dispatch("HEAD")
+
+    def send_error(self, code: int, message: str | None = None, explain: str | None = None) -> None:
+        """http.server's own errors (414 URI too long, 431 headers too large, 400 bad request
+        line, 501) as one JSON line, like every other error."""
+        self.close_connection = True
+        try:
+            self._json({"error": message or self.responses.get(code, ("error",))[0]}, code)
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
+            pass
+
     def _dispatch(self, method: str) -> None:
         try:
             self._check_host()
+            if method not in ("GET", "HEAD"):
+                self._check_origin()
             path = urlsplit(self.path).path
             route = self._route(method, path)
             if route is None:
@@ -246,14 +271,33 @@ class Handler(BaseHTTPRequestHandler):
         raise RequestError(f"{method} is not allowed here", 405)
 
     def _check_host(self) -> None:
-        """On a loopback address only loopback Host names are served, so a web page
-        elsewhere cannot reach the server through DNS rebinding."""
-        host = self.server.server_address[0]
-        if not _is_loopback(host):
+        """Only Host names the server answers to are served, so a web page elsewhere cannot
+        reach it through DNS rebinding: loopback names, and on another address that address
+        and the names of ``--allowed-host``. The header is parsed as an authority (a name or
+        IP and an optional port, nothing else: ``localhost:80@evil.com`` is refused)."""
+        name = parse_host(self.headers.get("Host") or "")
+        if name is None:
+            raise RequestError(f"bad Host header {self.headers.get('Host', '')!r:.80}", 400)
+        bound = self.server.server_address[0]
+        if name in ("localhost", "") or _is_loopback(name):
             return
-        name = (self.headers.get("Host") or "").rsplit(":", 1)[0].strip("[]").lower()
-        if name not in ("localhost", "127.0.0.1", "::1", "") and not _is_loopback(name):
-            raise RequestError(f"host {name!r} not allowed", 403)
+        if not _is_loopback(bound) and (name == bound.lower() or name in self.app.allowed_hosts):
+            return
+        if bound in ("0.0.0.0", "::") and _is_ip(name):  # reached by one of its addresses
+            return
+        raise RequestError(f"host {name!r} not allowed (umf serve --allowed-host NAME)", 403)
+
+    def _check_origin(self) -> None:
+        """A state-changing request from a browser must come from the page itself (its
+        Origin is this server's) or from ``--allow-origin``; any other web page is refused,
+        whatever it sends (no-cors fetch, sendBeacon, a form). Clients that send no Origin
+        (curl, scripts) are not browsers and pass."""
+        origin = self.headers.get("Origin")
+        if origin is None:
+            return
+        own = f"http://{(self.headers.get('Host') or '').strip().lower()}"
+        if origin.strip().lower() != own and origin.strip() not in self.app.allowed_origins:
+            raise RequestError(f"requests from {origin!r:.80} are not allowed", 403)
 
     # -- bodies
     def _body(self, limit: int) -> bytes:
@@ -275,8 +319,8 @@ class Handler(BaseHTTPRequestHandler):
         return data
 
     def _json_body(self) -> Any:
-        kind = (self.headers.get("Content-Type") or "application/json").split(";")[0].strip()
-        if kind != "application/json":
+        kind = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
+        if kind != "application/json":  # never text/plain: a cross-site form could send it
             raise RequestError("send the fields as JSON (Content-Type: application/json)", 415)
         data = self._body(MAX_JSON_BYTES)
         try:
@@ -293,6 +337,9 @@ class Handler(BaseHTTPRequestHandler):
         name = (query.get("name") or [""])[0]
         if not name:
             raise RequestError("name the file: POST /api/upload?name=FILE.bvh")
+        kind = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
+        if kind != "application/octet-stream":  # the types a cross-site form can send are not
+            raise RequestError("send the file as Content-Type: application/octet-stream", 415)
         self._json(self.app.upload(name, self._body(MAX_UPLOAD_BYTES)))
 
     def _video(self, sid: str, start: bool) -> None:
@@ -336,7 +383,7 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Content-Length", str(len(data)))
         self.send_header("Cache-Control", "max-age=3600" if cache else "no-cache")
         if download:
-            self.send_header("Content-Disposition", f'attachment; filename="{download}"')
+            self.send_header("Content-Disposition", content_disposition(download))
         self.end_headers()
         self.wfile.write(data)
 
@@ -348,6 +395,36 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Cache-Control", "no-cache")
         self.end_headers()
         self.wfile.write(data)
+
+
+def content_disposition(name: str) -> str:
+    """``attachment`` with an ASCII fallback name (quotes, backslashes and control
+    characters replaced) and the exact name as RFC 6266/5987 ``filename*``: no header
+    injection, any Unicode name."""
+    from urllib.parse import quote
+
+    plain = "".join(c if 32 <= ord(c) < 127 and c not in '"\\' else "_" for c in name)
+    return f"attachment; filename=\"{plain}\"; filename*=UTF-8''{quote(name, safe='')}"
+
+
+_HOST = re.compile(r"^(?:\[([0-9a-fA-F:.]+)\]|([A-Za-z0-9.-]*))(?::(\d{1,5}))?$")
+
+
+def parse_host(value: str) -> str | None:
+    """The host name of a Host header (lower case, IPv6 without brackets), or None when
+    the header is not a bare ``host[:port]`` authority."""
+    m = _HOST.match(value.strip())
+    if m is None:
+        return None
+    return (m.group(1) or m.group(2) or "").lower()
+
+
+def _is_ip(host: str) -> bool:
+    try:
+        ipaddress.ip_address(host)
+    except ValueError:
+        return False
+    return True
 
 
 def _is_loopback(host: str) -> bool:

@@ -1,0 +1,105 @@
+"""`umf serve` against a hostile web page: cross-origin and content-type rules, Host
+parsing, JSON for every error, safe download names. No model is loaded (no request here
+gets that far)."""
+
+from __future__ import annotations
+
+import http.client
+import json
+
+import pytest
+
+from umf.serve.scenes import ModelHolder
+from umf.serve.server import App, content_disposition, parse_host, start_in_thread
+
+
+def _never():
+    raise AssertionError("no request of these tests may load the model")
+
+
+@pytest.fixture(scope="module")
+def server(tmp_path_factory):
+    app = App(ModelHolder(_never), None, workdir=tmp_path_factory.mktemp("srv"),
+              allowed_origins=("http://tools.example:9000",))  # fmt: skip
+    srv = start_in_thread(app)
+    yield srv.server_address[1]
+    srv.shutdown()
+    srv.server_close()
+
+
+def ask(port, method, path, body=b"", headers=None):
+    conn = http.client.HTTPConnection("127.0.0.1", port, timeout=30)
+    hdrs = {"Host": f"localhost:{port}", **(headers or {})}
+    conn.request(method, path, body=body or None, headers=hdrs)
+    r = conn.getresponse()
+    data = r.read()
+    conn.close()
+    return r.status, dict(r.getheaders()), data
+
+
+def error(answer) -> tuple[int, str]:
+    status, headers, data = answer
+    assert headers["Content-Type"] == "application/json", data[:200]
+    return status, json.loads(data)["error"]
+
+
+BODY = json.dumps({"prompt": "a", "people": 1}).encode()
+
+
+@pytest.mark.parametrize(
+    ("headers", "status", "needle"),
+    [({"Content-Type": "application/json", "Origin": "https://evil.example"}, 403, "not allowed"),
+     ({"Content-Type": "text/plain"}, 415, "JSON"),  # what a no-cors fetch or a form sends
+     ({}, 415, "JSON"),  # a Blob body with no type
+     ({"Content-Type": "application/x-www-form-urlencoded"}, 415, "JSON")],
+)  # fmt: skip
+def test_a_cross_site_page_cannot_generate(server, headers, status, needle):
+    got = error(ask(server, "POST", "/api/generate", BODY, headers))
+    assert got[0] == status and needle in got[1]
+
+
+def test_the_page_itself_and_an_allowed_origin_get_through_the_origin_check(server):
+    for origin in (f"http://localhost:{server}", "http://tools.example:9000"):
+        status, msg = error(ask(server, "POST", "/api/generate", b"{}", {
+            "Content-Type": "application/json", "Origin": origin}))  # fmt: skip
+        assert status == 400 and "not allowed" not in msg  # refused for its fields, not origin
+
+
+@pytest.mark.parametrize("kind", ["text/plain", "multipart/form-data", None])
+def test_uploads_only_as_octet_stream(server, kind):
+    headers = {} if kind is None else {"Content-Type": kind}
+    status, msg = error(ask(server, "POST", "/api/upload?name=a.bvh", b"HIERARCHY", headers))
+    assert status == 415 and "octet-stream" in msg
+
+
+@pytest.mark.parametrize(
+    ("host", "status"),
+    [("evil.example", 403), ("localhost:1@evil.example", 400), ("localhost.evil.example", 403),
+     ("127.0.0.1.nip.io", 403), ("a b", 400)],
+)  # fmt: skip
+def test_host_names_other_than_loopback_are_refused(server, host, status):
+    assert error(ask(server, "GET", "/api/health", headers={"Host": host}))[0] == status
+    assert ask(server, "GET", "/api/health", headers={"Host": "[::1]:80"})[0] == 200
+
+
+@pytest.mark.parametrize("method", ["OPTIONS", "PATCH", "PUT", "DELETE"])
+def test_other_methods_answer_one_json_line(server, method):
+    status, _ = error(
+        ask(server, method, "/api/generate", b"", {"Origin": f"http://localhost:{server}"})
+    )
+    assert status in (404, 405)
+
+
+def test_head_and_http_servers_own_errors_are_json(server):
+    status, headers, _ = ask(server, "HEAD", "/api/health")
+    assert status in (404, 405) and headers["Content-Type"] == "application/json"
+    status, _ = error(ask(server, "GET", "/" + "a" * 70_000))  # http.server: 414
+    assert status == 414
+
+
+def test_download_names_cannot_inject_headers():
+    value = content_disposition('x"\r\nSet-Cookie: a=b.glb')
+    assert "\r" not in value and "\n" not in value
+    assert value.startswith("attachment; filename=\"x___Set-Cookie: a=b.glb\"; filename*=UTF-8''")
+    assert "%0D%0A" in value
+    assert parse_host("localhost:8000@evil.com") is None and parse_host("[::1]:8000") == "::1"
