@@ -378,3 +378,17 @@ def test_missing_file_and_stream_names(tmp_path: Path) -> None:
     stream.name = "upload.bvh"
     with pytest.raises(UMFError, match=re.escape("upload.bvh")):
         read_bvh(stream)
+
+
+def test_a_tiny_file_cannot_make_the_reader_allocate_much():
+    """Frames: N with no channels held no motion but cost N frames of work downstream; a
+    frame count past the cap is refused before anything is read."""
+    from umf.data.bvh import MAX_FRAMES, parse_bvh
+    from umf.errors import UMFError
+
+    head = "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n"
+    with pytest.raises(UMFError, match="no CHANNELS"):
+        parse_bvh(head + "}\nMOTION\nFrames: 100000\nFrame Time: 0.03\n")
+    chans = "  CHANNELS 3 Xposition Yposition Zposition\n}\n"
+    with pytest.raises(UMFError, match="at most"):
+        parse_bvh(head + chans + f"MOTION\nFrames: {MAX_FRAMES + 1}\nFrame Time: 0.03\n0 0 0\n")

@@ -112,3 +112,20 @@ def test_an_api_actor_in_centimetres_is_one_line(real_joints):
     assert check_actor(joints, 30.0, 300) is joints
     with pytest.raises(UMFError, match="in cm, not metres"):
         check_actor(joints * 100, 30.0, 300)
+
+
+def test_a_zip_bomb_and_an_endless_motion_are_refused_before_they_are_read(tmp_path):
+    import zipfile
+
+    import umf.data.motion_file as mf
+
+    np.savez_compressed(tmp_path / "bomb.npz", joints=np.zeros((8, 150_000, 22, 3), np.float32))
+    assert (tmp_path / "bomb.npz").stat().st_size < 1_000_000
+    with zipfile.ZipFile(tmp_path / "bomb.npz") as z:
+        assert z.getinfo("joints.npy").file_size > 300 * 10**6
+    with pytest.raises(UMFError, match="unpacks to"):
+        load_motion(tmp_path / "bomb.npz")
+    np.savez(tmp_path / "slow.npz", joints=np.zeros((1, 4000, 22, 3), np.float32), fps=1.0)
+    assert mf.MAX_SECONDS < 4000
+    with pytest.raises(UMFError, match="s of motion"):
+        load_motion(tmp_path / "slow.npz")

@@ -52,6 +52,8 @@ _FRAMES_RE = re.compile(
     r"\s*Frames\s*:\s*(\S+)\s+Frame\s+Time\s*:\s*(\S+)[ \t]*(?:\n|$)", re.IGNORECASE
 )
 _ROW_FORMAT = "%.6f"
+MAX_FRAMES = 1_000_000  # a bound on what a file may make the reader allocate
+MAX_JOINTS = 1_000
 
 
 @dataclass
@@ -133,6 +135,8 @@ def parse_bvh(text: str, label: str = "<string>") -> BVH:
         raise _error(label, "no MOTION section (truncated or not a BVH file)")
     tokens = _Tokens(text[: found.start()], label)
     names, parents, offsets, channels, end_sites = _parse_hierarchy(tokens)
+    if len(names) > MAX_JOINTS:
+        raise _error(label, f"{len(names)} joints; umf reads at most {MAX_JOINTS}")
     num_channels = sum(len(c) for c in channels)
     motion, frame_time = _parse_motion(text, found.end(), num_channels, label)
     return BVH(names, parents, offsets, channels, motion, frame_time, end_sites, label)
@@ -271,8 +275,13 @@ def _parse_motion(text: str, start: int, num_channels: int, label: str) -> tuple
     if declared < 0 or not np.isfinite(frame_time) or frame_time < 0:
         raise _error(label, f"bad Frames/Frame Time values {declared}, {frame_time}")
     data = text[header.end() :]
-    if num_channels == 0 or not data.strip():
-        motion = np.zeros((declared if num_channels == 0 else 0, num_channels))
+    if declared > MAX_FRAMES:
+        raise _error(label, f"declares {declared} frames; umf reads at most {MAX_FRAMES:,} "
+                     "(about 9 hours at 30 fps): cut the file")  # fmt: skip
+    if num_channels == 0:  # nothing to read per frame: a frame count alone is no motion
+        raise _error(label, "no CHANNELS in the hierarchy: the file holds no motion")
+    if not data.strip():
+        motion = np.zeros((0, num_channels))
     else:
         try:
             motion = np.loadtxt(io.StringIO(data), dtype=np.float64, ndmin=2, comments=None)

@@ -20,6 +20,9 @@ from umf.errors import UMFError
 from umf.scene import Scene
 
 FPS = 30.0
+MAX_NPZ_JOINTS_BYTES = 256 * 10**6  # 16 people x 10 min at 30 fps is 76 MB
+MAX_SECONDS = 3600.0  # a motion file longer than an hour is refused before it is resampled
+
 Motion = Scene  # what load_motion returned before scenes and motion files were one class
 
 
@@ -28,6 +31,10 @@ def _load_npz(path: Path) -> tuple[np.ndarray, str, float]:
         with np.load(path, allow_pickle=False) as z:
             if "joints" not in z:
                 raise UMFError(f"{path}: no 'joints' array (expected a umf scene file)")
+            size = z.zip.getinfo("joints.npy").file_size  # from the zip directory: not read yet
+            if size > MAX_NPZ_JOINTS_BYTES:
+                raise UMFError(f"{path}: its joints array unpacks to {size / 1e6:.0f} MB; umf "
+                               f"reads at most {MAX_NPZ_JOINTS_BYTES / 1e6:.0f} MB")  # fmt: skip
             joints = np.asarray(z["joints"], dtype=np.float32)
             text = str(z["text"]) if "text" in z else ""
             fps = float(z["fps"]) if "fps" in z else FPS
@@ -74,6 +81,9 @@ def load_motion(path: str | Path) -> Scene:
         raise UMFError(f"{path}: the motion contains NaN or infinite values")
     if not 1.0 <= fps <= 1000.0:
         raise UMFError(f"{path}: implausible frame rate {fps:g} fps")
+    if (joints.shape[1] - 1) / fps > MAX_SECONDS:
+        raise UMFError(f"{path}: {(joints.shape[1] - 1) / fps:.0f} s of motion; umf reads at "
+                       f"most {MAX_SECONDS:.0f} s")  # fmt: skip
     meta = {"source_fps": fps, "source": str(path)}
     if path.suffix.lower() == ".npz":  # metres by the format; an adult's size says otherwise
         unit, name = choose_unit(joints)
