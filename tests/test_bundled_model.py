@@ -156,3 +156,13 @@ def test_second_person_strides_beside_the_first(pipe):
     assert second[0] > 0.6, second  # the legs swing
     assert second[1] > 0.5, second  # and carry the body forward
     assert second[0] > 0.6 * first[0], (first, second)
+
+
+def test_the_bundled_model_says_what_it_does_not_know(pipe):
+    """It carries its vocabulary: trained wordings and close paraphrases are known, actions
+    no corpus of it has are flagged (calibration: results/coverage/calibration.json)."""
+    known, hug, salsa = pipe.coverage(["A person walks forward.", "Two people hug each other.",
+                                       "Two people dance salsa together."])  # fmt: skip
+    assert known["known"] and salsa["known"] and not hug["known"]
+    assert "contact" in salsa and "contact" not in known  # a real take whose partners touch
+    assert {"salsa", "backflip", "walk"} <= set(pipe.vocabulary.actions)

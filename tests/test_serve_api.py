@@ -115,6 +115,7 @@ def test_generate_returns_the_scene_and_its_files(server, scene):
     joints = np.array(scene["joints"])
     assert joints.shape == (3, 60, 22, 3) and np.isfinite(joints).all()
     assert scene["people"] == 3 and scene["frames"] == 60 and scene["seed"] == 7
+    assert scene["coverage"]["known"] and scene["coverage"]["nearest"]  # the model knows it
     status, headers, glb = request(base, scene["files"]["glb"])
     assert status == 200 and glb[:4] == b"glTF" and len(glb) == int.from_bytes(glb[8:12], "little")
     assert headers["Content-Disposition"].startswith("attachment")
