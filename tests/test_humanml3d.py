@@ -300,3 +300,28 @@ def test_round_trip_real_capture(real_joints: torch.Tensor) -> None:
         recover_joints(encode_joints(real_joints.float())).double() - canonical(real_joints)[:-1]
     )
     assert err32.abs().max() < 1e-4
+
+
+def test_caption_times_that_are_no_segment_are_refused_per_line(humanml_root: Path) -> None:
+    """A negative start or end would count frames from the clip's end; inf is no time."""
+    _write_text(humanml_root / "texts" / "000001.txt", [
+        ("a person walks forward.", "0.0", "0.0"), ("from the end.", "-2.0", "-1.0"),
+        ("forever.", "0", "inf"), ("backwards in time.", "3.0", "1.0"),
+    ])  # fmt: skip
+    problems: list[tuple[Path, str]] = []
+    with pytest.warns(SkippedItemWarning):
+        clips = {c.id: c for c in load_humanml3d(humanml_root, problems=problems)}
+    assert clips["000001"].captions == ["a person walks forward."]
+    assert "000001#0" not in clips
+    reasons = [r for p, r in problems if p.name == "000001.txt"]
+    assert len(reasons) == 3 and all("not a segment" in r for r in reasons)
+
+
+@pytest.mark.parametrize("entry", ["../../outside", "/etc/passwd", "a/b"])
+def test_split_ids_stay_inside_the_dataset(humanml_root: Path, entry: str) -> None:
+    (humanml_root / "train.txt").write_text(f"000001\n{entry}\n")
+    with pytest.raises(UMFError, match="plain names"):
+        list(load_humanml3d(humanml_root, problems=[]))
+    (humanml_root / "train.txt").write_bytes(b"\xff\xfe000001\n")
+    with pytest.raises(UMFError, match="UTF-8"):
+        list(load_humanml3d(humanml_root, problems=[]))

@@ -34,6 +34,7 @@ first frame faces +Z with the root above the origin.
 from __future__ import annotations
 
 import math
+import re
 import warnings
 from collections.abc import Iterator
 from dataclasses import dataclass
@@ -107,13 +108,26 @@ def load_array(
     return arr.astype(np.float64)
 
 
+_SAFE_ID = re.compile(r"[A-Za-z0-9_][A-Za-z0-9_.\-]*")
+
+
 def read_splits(root: Path) -> dict[str, list[str]]:
     """Ids listed in each present ``<split>.txt`` (file order, blank lines dropped)."""
     out: dict[str, list[str]] = {}
     for name in SPLITS:
         path = root / f"{name}.txt"
         if path.is_file():
-            out[name] = [s.strip() for s in path.read_text().splitlines() if s.strip()]
+            try:
+                lines = path.read_text(encoding="utf-8").splitlines()
+            except (OSError, UnicodeDecodeError) as exc:
+                raise UMFError(
+                    f"{path}: not a readable UTF-8 split file ({type(exc).__name__})"
+                ) from None
+            ids = [s.strip() for s in lines if s.strip()]
+            bad = [i for i in ids if not _SAFE_ID.fullmatch(i)]
+            if bad:  # an id is a file name in the dataset's folders, never a path out of them
+                raise UMFError(f"{path}: ids must be plain names, got {bad[0]!r}")
+            out[name] = ids
     return out
 
 
@@ -406,7 +420,18 @@ def _read_captions(path: Path, problems: list[tuple[Path, str]] | None) -> list[
     except (OSError, UnicodeDecodeError) as exc:
         report_skipped(path, f"cannot read captions ({exc})", problems)
         return []
-    caps = [c for c in map(parse_caption_line, lines) if c is not None]
+    caps = []
+    for n, line in enumerate(lines, start=1):
+        c = parse_caption_line(line)
+        if c is None:
+            continue
+        if not (math.isfinite(c.start) and math.isfinite(c.end)) or c.start < 0 or c.end < 0 \
+                or (c.end and c.end <= c.start):  # fmt: skip
+            # a negative time would count frames from the clip's end: refused, not guessed
+            report_skipped(path, f"line {n}: caption times {c.start:g}-{c.end:g} s are not a "
+                           "segment (finite, non-negative, end after start)", problems)  # fmt: skip
+            continue
+        caps.append(c)
     if not caps:
         report_skipped(path, "no captions", problems)
     return caps
