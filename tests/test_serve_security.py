@@ -103,3 +103,33 @@ def test_download_names_cannot_inject_headers():
     assert value.startswith("attachment; filename=\"x___Set-Cookie: a=b.glb\"; filename*=UTF-8''")
     assert "%0D%0A" in value
     assert parse_host("localhost:8000@evil.com") is None and parse_host("[::1]:8000") == "::1"
+
+
+def _glb(path, doc) -> None:
+    import struct
+
+    data = json.dumps(doc).encode()
+    data += b" " * (-len(data) % 4)
+    path.write_bytes(struct.pack("<4sII", b"glTF", 2, 20 + len(data))
+                     + struct.pack("<I4s", len(data), b"JSON") + data)  # fmt: skip
+
+
+@pytest.mark.parametrize(
+    ("doc", "needle"),
+    [({"asset": {"extras": {"fps": "abc"}}}, "not a number"),
+     ({"asset": {"extras": {"fps": "0"}}}, "not a frame rate"),
+     ({"asset": {"extras": {"fps": "nan"}}}, "not a frame rate"),
+     ([1, 2], "not an object")],
+)  # fmt: skip
+def test_a_glb_with_wrong_extras_is_one_line_and_never_stored(tmp_path, doc, needle):
+    from umf.errors import UMFError
+    from umf.serve.scenes import SceneStore, add_glb_file
+
+    store = SceneStore(tmp_path / "scenes")
+    _glb(tmp_path / "x.glb", doc)
+    with pytest.raises(UMFError, match=needle):
+        add_glb_file(store, tmp_path / "x.glb")
+    assert store.all() == []
+    _glb(tmp_path / "y.glb", {"asset": {"extras": {"people": 3, "seed": "x", "text": 5}}})
+    record = add_glb_file(store, tmp_path / "y.glb")  # odd but harmless extras: ignored
+    assert record.people == 0 and record.params["seed"] is None and record.text == "y"

@@ -277,16 +277,30 @@ def read_glb_json(path: Path) -> dict[str, Any]:
 def add_glb_file(store: SceneStore, path: Path) -> SceneRecord:
     """A GLB scene as it is: the viewer plays its animation; no joints, so no other files."""
     doc = read_glb_json(path)
-    extras = (doc.get("asset") or {}).get("extras") or {}
-    fps = float(extras.get("fps") or 30.0)
+    if not isinstance(doc, dict):
+        raise UMFError(f"{path}: the GLB's JSON is not an object")
+    asset = doc.get("asset") if isinstance(doc.get("asset"), dict) else {}
+    extras = asset.get("extras") if isinstance(asset.get("extras"), dict) else {}
+    try:  # umf's own extras; any other writer's are optional, and wrong ones are refused
+        fps = float(extras.get("fps", 30.0))
+    except (TypeError, ValueError):
+        raise UMFError(
+            f"{path}: asset.extras.fps {extras.get('fps')!r:.40} is not a number"
+        ) from None
+    if not 1.0 <= fps <= 1000.0:  # NaN fails too
+        raise UMFError(f"{path}: asset.extras.fps {fps:g} is not a frame rate (1-1000)")
     try:
         sampler = doc["animations"][0]["samplers"][0]
         frames = int(doc["accessors"][sampler["input"]]["count"])
     except (KeyError, IndexError, TypeError, ValueError):
         frames = 1
-    people = len(extras.get("people") or doc.get("skins") or [])
-    record = store.new_record(str(extras.get("text") or path.stem), None, fps, people, frames,
-                              {"seed": extras.get("seed"), "source": path.name})  # fmt: skip
+    named = extras.get("people")
+    skins = doc.get("skins")
+    people = len(named) if isinstance(named, list) else len(skins) if isinstance(skins, list) else 0
+    seed = extras.get("seed") if isinstance(extras.get("seed"), int) else None
+    text = extras.get("text") if isinstance(extras.get("text"), str) else path.stem
+    record = store.new_record(text or path.stem, None, fps, people, max(frames, 1),
+                              {"seed": seed, "source": path.name})  # fmt: skip
     shutil.copyfile(path, record.folder / path.name)
     record.files["glb"] = path.name
     return store.add(record)
