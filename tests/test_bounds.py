@@ -125,3 +125,23 @@ def test_a_step_total_below_the_stage_count_and_a_lone_surrogate_are_one_line():
     assert check_for_model(check_request("a person walks", pflow_steps=2), cfg) > 0
     with pytest.raises(UMFError, match="not valid text"):
         check_request("a person \ud800 walks")
+
+
+def test_a_full_disk_is_one_line_naming_the_file(monkeypatch, capsys):
+    import errno
+
+    import umf.cli.main as cli
+
+    def full(*a, **k):
+        try:
+            raise OSError(errno.ENOSPC, "No space left on device", "out/x.npz")
+        except OSError as inner:
+            raise RuntimeError("while writing") from inner
+
+    monkeypatch.setattr(cli, "app", full)
+    with pytest.raises(SystemExit) as stop:
+        cli.run(["generate", "x"])
+    assert stop.value.code == 1
+    err = capsys.readouterr().err
+    assert err.count("\n") == 1 and "no space left on device writing out/x.npz" in err
+    assert cli.disk_full(ValueError("x")) is None

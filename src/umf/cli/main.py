@@ -56,6 +56,22 @@ def _one_line(text: str) -> str:
     return " ".join(str(text).split())
 
 
+def disk_full(exc: BaseException) -> str | None:
+    """One line for a full disk (or quota) anywhere in an exception's chain, naming the file
+    when the error does; None for any other error. Outputs are written atomically, so what
+    was there before is intact."""
+    import errno
+
+    seen = set()
+    while exc is not None and id(exc) not in seen:
+        seen.add(id(exc))
+        if isinstance(exc, OSError) and exc.errno in (errno.ENOSPC, errno.EDQUOT):
+            where = f" writing {exc.filename}" if exc.filename else ""
+            return f"no space left on device{where} (nothing half-written was kept)"
+        exc = exc.__cause__ or exc.__context__
+    return None
+
+
 def run(argv: list[str] | None = None) -> None:
     """Console-script entry: user errors become one line on stderr and a non-zero exit
     (1 for bad values and files, 2 for malformed command lines, as click uses)."""
@@ -76,6 +92,12 @@ def run(argv: list[str] | None = None) -> None:
     except KeyboardInterrupt:
         print("umf: interrupted", file=sys.stderr)
         sys.exit(130)
+    except Exception as exc:  # a full disk under any wrapper; anything else is a bug: raise
+        full = disk_full(exc)
+        if full is None:
+            raise
+        print(f"umf: error: {full}", file=sys.stderr)
+        sys.exit(1)
     if code == 130:  # typer turns Ctrl-C into exit code 130
         print("umf: interrupted", file=sys.stderr)
     sys.exit(code if isinstance(code, int) else 0)
