@@ -405,3 +405,20 @@ def test_prepare_never_destroys_a_corpus_that_worked(tmp_path, monkeypatch):
         prepare_corpus(out, {"bandai": BANDAI_FIXTURE}, cfg, progress=False, log=lambda s: None)
     assert len(Corpus.load(out).clips) == len(json.loads(before))  # the old one, whole
     assert not list(out.glob(".staging-*"))
+
+
+def test_a_corrupt_corpus_is_one_line(tmp_path):
+    from conftest import BANDAI_FIXTURE
+    from umf.data.corpus import Corpus, PrepareConfig, prepare_corpus
+
+    cfg = PrepareConfig(train_scenes=4, val_scenes=2, test_scenes=2, test_groups=1)
+    out = prepare_corpus(tmp_path / "c", {"bandai": BANDAI_FIXTURE}, cfg, progress=False,
+                         log=lambda s: None)  # fmt: skip
+    assert out["total"]["clips"] > 0
+    (tmp_path / "c" / "normalizer.safetensors").write_bytes(b"\x08\x00\x00\x00garbage!")
+    with pytest.raises(UMFError, match=r"normalizer\.safetensors: unreadable"):
+        _ = Corpus.load(tmp_path / "c").normalizer
+    data = (tmp_path / "c" / "clips.npz").read_bytes()
+    (tmp_path / "c" / "clips.npz").write_bytes(data[: len(data) // 2])
+    with pytest.raises(UMFError, match="corrupt corpus"):
+        Corpus.load(tmp_path / "c")

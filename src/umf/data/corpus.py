@@ -298,13 +298,24 @@ class Corpus:
                 )
             clips = _load_clips(root / "clips.npz")
             scenes = json.loads((root / "scenes.json").read_text())
-        except (OSError, ValueError, KeyError) as exc:
-            raise UMFError(f"{root}: corrupt corpus ({exc})") from exc
+        except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as exc:
+            why = f"{type(exc).__name__}: {str(exc)[:120]}"
+            raise UMFError(
+                f"{root}: corrupt corpus ({why}); run `umf data prepare` again"
+            ) from None
         return cls(root, manifest, clips, scenes)
 
     @property
     def normalizer(self) -> Normalizer:
-        return Normalizer.load(self.root / "normalizer.safetensors")
+        path = self.root / "normalizer.safetensors"
+        try:
+            norm = Normalizer.load(path)
+        except Exception as exc:  # safetensors raises its own error types on a corrupt file
+            raise UMFError(f"{path}: unreadable ({type(exc).__name__}); run `umf data prepare` "
+                           "again") from None  # fmt: skip
+        if norm.mean.shape != (262,) or not bool((norm.std > 0).all()):
+            raise UMFError(f"{path}: not a 262-d normaliser with positive std")
+        return norm
 
     def split_clips(self, split: str) -> list[MotionClip]:
         return [c for c in self.clips if c.split == split]
