@@ -133,3 +133,10 @@ def test_a_glb_with_wrong_extras_is_one_line_and_never_stored(tmp_path, doc, nee
     _glb(tmp_path / "y.glb", {"asset": {"extras": {"people": 3, "seed": "x", "text": 5}}})
     record = add_glb_file(store, tmp_path / "y.glb")  # odd but harmless extras: ignored
     assert record.people == 0 and record.params["seed"] is None and record.text == "y"
+
+
+def test_json_nested_too_deep_is_a_400(server):
+    body = b"[" * 30_000 + b"]" * 30_000
+    status, msg = error(ask(server, "POST", "/api/generate", body,
+                            {"Content-Type": "application/json"}))  # fmt: skip
+    assert status == 400 and "nests too deeply" in msg

@@ -327,6 +327,8 @@ class Handler(BaseHTTPRequestHandler):
             return json.loads(data.decode("utf-8"))
         except (UnicodeDecodeError, ValueError):
             raise RequestError("the request body is not valid JSON") from None
+        except RecursionError:  # [[[[...]]]] 30,000 deep fits in 64 KB
+            raise RequestError("the request body nests too deeply") from None
 
     def _post_generate(self) -> None:
         request = parse_generate(self._json_body())
