@@ -177,3 +177,14 @@ def test_reserved_and_bad_module_names(tmp_path):
     for name in ("normalizer", "../x", ""):
         with pytest.raises(UMFError, match="invalid checkpoint module name"):
             C.save_checkpoint(tmp_path / "ck", {name: _net()})
+
+
+def test_temporaries_of_a_killed_writer_are_removed(tmp_path):
+    from umf.io import atomic_path, remove_stale_temporaries
+
+    (tmp_path / ".loss_curves.png.abc123.tmp").write_bytes(b"")  # what kill -9 leaves
+    (tmp_path / "keep.tmp").write_text("not ours")
+    with atomic_path(tmp_path / "x.txt") as tmp:
+        tmp.write_text("done")
+    assert remove_stale_temporaries(tmp_path) == 1
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.tmp", "x.txt"]

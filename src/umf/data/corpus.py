@@ -37,7 +37,7 @@ from umf.data.clip import FPS, MotionClip
 from umf.data.humanml3d import SkippedItemWarning
 from umf.data.scenes import Actor, build_scene, build_scene_features, compose_corpus
 from umf.errors import UMFError
-from umf.io import atomic_path, write_json_atomic
+from umf.io import atomic_path, remove_stale_temporaries, write_json_atomic
 from umf.representation import (
     Normalizer,
     assemble_features,
@@ -452,6 +452,9 @@ def prepare_corpus(
     shutil.rmtree(stage, ignore_errors=True)
     for old in out.glob(".staging-*"):  # left by a killed run
         shutil.rmtree(old, ignore_errors=True)
+    remove_stale_temporaries(out)
+    (out / "cache").mkdir(exist_ok=True)
+    remove_stale_temporaries(out / "cache")
     cache_dir = out / "cache"
     problems: list[tuple[str, str]] = []
     clips: list[MotionClip] = []

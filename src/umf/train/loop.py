@@ -39,7 +39,7 @@ from umf.checkpoint import (
 )
 from umf.config import TrainConfig
 from umf.errors import UMFError
-from umf.io import atomic_path
+from umf.io import atomic_path, remove_stale_temporaries
 from umf.representation import Normalizer
 from umf.train.datasets import MixedBatches, ShardedSampler
 
@@ -713,6 +713,7 @@ def train(
         say(f"resume: no checkpoint in {out}, starting from step 0")
     if fabric.is_global_zero:
         out.mkdir(parents=True, exist_ok=True)
+        remove_stale_temporaries(out)  # half-written curves of a run killed with -9
     fabric.barrier()
     run = _build(fabric, stage, train_loader, val_loader, cfg, out, found, say, tensorboard)
     run.config, run.normalizer, run.progress = dict(config or {}), normalizer, progress
