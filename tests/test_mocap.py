@@ -422,3 +422,14 @@ def test_a_corrupt_corpus_is_one_line(tmp_path):
     (tmp_path / "c" / "clips.npz").write_bytes(data[: len(data) // 2])
     with pytest.raises(UMFError, match="corrupt corpus"):
         Corpus.load(tmp_path / "c")
+
+
+def test_a_source_without_a_readable_clip_leaves_nothing(tmp_path):
+    from umf.data.corpus import mocap_sources, prepare_corpus
+
+    lib = tmp_path / "lib"
+    lib.mkdir()
+    (lib / "broken.bvh").write_text("HIERARCHY\nROOT a {\n")
+    with pytest.raises(UMFError, match="no readable clip"):
+        prepare_corpus(tmp_path / "out", mocap_sources([lib]), progress=False, log=lambda s: None)
+    assert not (tmp_path / "out").exists()

@@ -445,6 +445,7 @@ def prepare_corpus(
             raise UMFError(f"{name} data not found: {path}")
     check_prepare_config(config)
     t0 = time.perf_counter()
+    fresh = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     # a corpus that worked keeps working until the new one is complete: every file is
     # written into a staging folder and moved into place at the end, the manifest last
@@ -474,7 +475,13 @@ def prepare_corpus(
         log(f"{name}: {len(got)} clips" + (" (cached)" if reused else ""))
     for origin, reason in problems:
         log(f"skipped {origin}: {reason}")
-    if not clips:
+    if not clips:  # leave nothing behind: a folder this run made, or its empty caches
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)
+        else:
+            for name in sources:
+                for cache in cache_dir.glob(f"{name}-*.npz"):
+                    cache.unlink(missing_ok=True)
         raise UMFError("no readable clip in the given sources")
 
     index = [{"id": c.id, "source": c.source, "split": c.split, **c.meta} for c in clips]
