@@ -23,6 +23,10 @@ from umf.serve.server import MAX_JSON_BYTES, App, find_three, start_in_thread
 BOW = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh"
 
 
+# one browser: its session cookie comes back with every request, as the page's does
+BROWSER = urllib.request.build_opener(urllib.request.HTTPCookieProcessor())
+
+
 def request(base: str, path: str, body=None, method=None, headers=None, raw: bytes | None = None):
     """(status, headers, bytes) of one request; errors are answers too."""
     data = raw if raw is not None else None if body is None else json.dumps(body).encode()
@@ -33,7 +37,7 @@ def request(base: str, path: str, body=None, method=None, headers=None, raw: byt
         base + path, data=data, method=method, headers=hdrs | (headers or {})
     )
     try:
-        with urllib.request.urlopen(req, timeout=600) as r:  # a starved CPU loads slowly
+        with BROWSER.open(req, timeout=600) as r:  # a starved CPU loads slowly
             return r.status, r.headers, r.read()
     except urllib.error.HTTPError as e:
         return e.code, e.headers, e.read()

@@ -140,3 +140,46 @@ def test_json_nested_too_deep_is_a_400(server):
     status, msg = error(ask(server, "POST", "/api/generate", body,
                             {"Content-Type": "application/json"}))  # fmt: skip
     assert status == 400 and "nests too deeply" in msg
+
+
+def test_each_browser_sees_only_its_own_scenes_and_uploads(tmp_path):
+    """Two sessions: a scene and an upload of one are invisible (404) to the other; scenes
+    opened by `umf view` (no session) are everybody's."""
+    import numpy as np
+
+    from umf.scene import Scene
+    from umf.serve.server import SESSION_COOKIE
+
+    app = App(ModelHolder(_never), None, workdir=tmp_path)
+    joints = np.zeros((1, 20, 22, 3), np.float32)
+    joints[..., 1] = np.linspace(0, 1.7, 22)[None, None, :]
+    mine = app.scenes.add_scene(Scene(joints, None, "mine", 30.0), {}, session="A" * 32)
+    shared = app.scenes.add_scene(Scene(joints, None, "shared", 30.0), {})
+    aid = app.actors.add(object(), session="A" * 32)
+    srv = start_in_thread(app)
+    port = srv.server_address[1]
+    try:
+        a = {"Cookie": f"{SESSION_COOKIE}={'A' * 32}"}
+        b = {"Cookie": f"{SESSION_COOKIE}={'B' * 32}"}
+
+        def listed(h):
+            answer = json.loads(ask(port, "GET", "/api/scenes", headers=h)[2])
+            return [s["id"] for s in answer["scenes"]]
+
+        assert listed(a) == [mine.id, shared.id] and listed(b) == [shared.id]
+        assert ask(port, "GET", f"/api/scenes/{mine.id}", headers=b)[0] == 404
+        assert ask(port, "GET", f"/files/{mine.id}/{mine.files['glb']}", headers=b)[0] == 404
+        assert ask(port, "GET", f"/files/{mine.id}/{mine.files['glb']}", headers=a)[0] == 200
+        _, headers, _ = ask(port, "GET", "/api/health")  # no cookie: a new session
+        assert (
+            SESSION_COOKIE in headers.get("Set-Cookie", "") and "HttpOnly" in headers["Set-Cookie"]
+        )
+        assert "Set-Cookie" not in ask(port, "GET", "/api/health", headers=a)[1]
+    finally:
+        srv.shutdown()
+        srv.server_close()
+    from umf.serve.validate import RequestError
+
+    with pytest.raises(RequestError):
+        app.actors.get(aid, "B" * 32)
+    assert app.actors.get(aid, "A" * 32) is not None

@@ -127,6 +127,7 @@ class SceneRecord:
     files: dict[str, str] = field(default_factory=dict)  # kind -> file name in folder
     video: Video = field(default_factory=Video)
     created: float = field(default_factory=time.time)
+    session: str | None = None  # the browser session that made it; None: every session's
 
     def summary(self) -> dict[str, Any]:
         """What the API returns about the scene (without the joints)."""
@@ -181,23 +182,29 @@ class SceneStore:
                 shutil.rmtree(old.folder, ignore_errors=True)
         return record
 
-    def get(self, sid: str) -> SceneRecord:
+    def get(self, sid: str, session: str | None = None) -> SceneRecord:
+        """A scene of ``session`` (or one every session sees); another session's scene is
+        answered as if it did not exist."""
         with self._lock:
             record = self._scenes.get(sid)
-        if record is None:
+        if record is None or record.session not in (None, session):
             raise RequestError(f"no scene {sid!r} (it may have been dropped)", 404)
         return record
 
-    def all(self) -> list[SceneRecord]:
+    def all(self, session: str | None = None) -> list[SceneRecord]:
+        """The scenes ``session`` sees: its own and those shown to everyone."""
         with self._lock:
-            return list(self._scenes.values())
+            return [r for r in self._scenes.values() if r.session in (None, session)]
 
-    def add_scene(self, scene: Any, params: dict[str, Any]) -> SceneRecord:
+    def add_scene(
+        self, scene: Any, params: dict[str, Any], session: str | None = None
+    ) -> SceneRecord:
         """A generated :class:`umf.pipeline.Scene` with its GLB, NPZ and BVH zip written."""
         if isinstance(scene.meta.get("coverage"), dict):
             params = {**params, "coverage": scene.meta["coverage"]}
         record = self.new_record(scene.text, scene.joints, float(scene.fps), scene.num_people,
                                  scene.num_frames, params)  # fmt: skip
+        record.session = session
         stem = slug(scene.text)
         record.files["glb"] = scene.save_glb(record.folder / f"{stem}.glb").name
         record.files["npz"] = scene.save_npz(record.folder / f"{stem}.npz").name
@@ -243,18 +250,18 @@ class ActorStore:
         self._ids = itertools.count(1)
         self._lock = threading.Lock()
 
-    def add(self, motion: Any) -> str:
+    def add(self, motion: Any, session: str | None = None) -> str:
         with self._lock:
             aid = f"a{next(self._ids)}"
-            self._motions[aid] = motion
+            self._motions[aid] = (session, motion)
             while len(self._motions) > self.limit:
                 self._motions.popitem(last=False)
         return aid
 
-    def get(self, aid: str) -> Any:
+    def get(self, aid: str, session: str | None = None) -> Any:
         with self._lock:
-            motion = self._motions.get(aid)
-        if motion is None:
+            owner, motion = self._motions.get(aid, (None, None))
+        if motion is None or owner not in (None, session):
             raise RequestError(f"no uploaded motion {aid!r}; upload it again", 404)
         return motion
 

@@ -101,9 +101,9 @@ class App:
                 "busy": self.model.generating.locked(), "three": self.three is not None,
                 "scenes": len(self.scenes.all())}  # fmt: skip
 
-    def generate(self, req: GenerateRequest) -> dict[str, Any]:
+    def generate(self, req: GenerateRequest, session: str | None = None) -> dict[str, Any]:
         pipe = self.model.get()
-        actor = self._actor_window(req, pipe) if req.actor else None
+        actor = self._actor_window(req, pipe, session) if req.actor else None
         if not self.model.generating.acquire(timeout=BUSY_WAIT_S):
             raise RequestError("the server is busy with another scene; try again", 503)
         begin = time.perf_counter()
@@ -118,15 +118,15 @@ class App:
         params = {"seed": req.seed, "guidance": req.guidance, "steps": req.steps,
                   "sflow_steps": req.sflow_steps, "actor": req.actor,
                   "generate_seconds": round(time.perf_counter() - begin, 3)}  # fmt: skip
-        record = self.scenes.add_scene(scene, params)
+        record = self.scenes.add_scene(scene, params, session)
         return scene_json(record, req.joints)
 
-    def _actor_window(self, req: GenerateRequest, pipe: Any) -> np.ndarray:
+    def _actor_window(self, req: GenerateRequest, pipe: Any, session: str | None) -> np.ndarray:
         """Person ``actor_person`` of the upload, from ``start`` for ``seconds`` (capped at
         the model's longest motion): what `umf react` does with --start/--seconds."""
         from umf.data.motion_file import FPS
 
-        motion = self.actors.get(req.actor)
+        motion = self.actors.get(req.actor, session)
         if req.actor_person > motion.num_people:
             raise RequestError(f"the uploaded motion has {motion.num_people} people, "
                                f"no person {req.actor_person}")  # fmt: skip
@@ -138,7 +138,7 @@ class App:
         count = min(round(req.seconds * FPS) + 1, pipe.config.vae.max_frames + 1)
         return joints[first : first + count]
 
-    def upload(self, name: str, data: bytes) -> dict[str, Any]:
+    def upload(self, name: str, data: bytes, session: str | None = None) -> dict[str, Any]:
         """An actor motion (.bvh/.npz) read by ``load_motion``; returns its id for react."""
         from umf.data.motion_file import FPS, load_motion
 
@@ -159,7 +159,7 @@ class App:
                                f"({type(exc).__name__})") from None  # fmt: skip
         finally:
             Path(tmp).unlink(missing_ok=True)
-        aid = self.actors.add(motion)
+        aid = self.actors.add(motion, session)
         return {"actor": aid, "name": Path(name).name, "people": motion.num_people,
                 "frames": motion.num_frames, "seconds": round(motion.num_frames / FPS, 3),
                 "text": motion.text}  # fmt: skip
@@ -218,6 +218,7 @@ class Handler(BaseHTTPRequestHandler):
             pass
 
     def _dispatch(self, method: str) -> None:
+        self.session, self._new_session = read_session(self.headers.get("Cookie"))
         try:
             self._check_host()
             if method not in ("GET", "HEAD"):
@@ -242,7 +243,7 @@ class Handler(BaseHTTPRequestHandler):
             (): lambda: self._file(STATIC / "index.html"),
             ("api", "health"): lambda: self._json(self.app.health()),
             ("api", "scenes"): lambda: self._json(
-                {"scenes": [r.summary() for r in self.app.scenes.all()]}),
+                {"scenes": [r.summary() for r in self.app.scenes.all(self.session)]}),
         }  # fmt: skip
         posts: dict[tuple[str, ...], Callable[[], None]] = {
             ("api", "generate"): self._post_generate,
@@ -258,7 +259,7 @@ class Handler(BaseHTTPRequestHandler):
         if method == "GET" and len(parts) == 3 and parts[0] == "files":
             return lambda: self._scene_file(parts[1], parts[2])
         if len(parts) == 3 and parts[:2] == ["api", "scenes"] and method == "GET":
-            return lambda: self._json(scene_json(self.app.scenes.get(parts[2])))
+            return lambda: self._json(scene_json(self.app.scenes.get(parts[2], self.session)))
         if len(parts) == 4 and parts[:2] == ["api", "scenes"] and parts[3] == "mp4":
             if method in ("GET", "POST"):
                 return lambda: self._video(parts[2], start=method == "POST")
@@ -332,7 +333,7 @@ class Handler(BaseHTTPRequestHandler):
 
     def _post_generate(self) -> None:
         request = parse_generate(self._json_body())
-        self._json(self.app.generate(request))
+        self._json(self.app.generate(request, self.session))
 
     def _post_upload(self) -> None:
         query = parse_qs(urlsplit(self.path).query)
@@ -342,10 +343,10 @@ class Handler(BaseHTTPRequestHandler):
         kind = (self.headers.get("Content-Type") or "").split(";")[0].strip().lower()
         if kind != "application/octet-stream":  # the types a cross-site form can send are not
             raise RequestError("send the file as Content-Type: application/octet-stream", 415)
-        self._json(self.app.upload(name, self._body(MAX_UPLOAD_BYTES)))
+        self._json(self.app.upload(name, self._body(MAX_UPLOAD_BYTES), self.session))
 
     def _video(self, sid: str, start: bool) -> None:
-        record = self.app.scenes.get(sid)
+        record = self.app.scenes.get(sid, self.session)
         video = self.app.scenes.start_video(record) if start else record.video
         out = {"state": video.state, "done": video.done, "total": video.total,
                "error": video.error}  # fmt: skip
@@ -372,7 +373,7 @@ class Handler(BaseHTTPRequestHandler):
         self._file(path, cache=True)
 
     def _scene_file(self, sid: str, name: str) -> None:
-        record = self.app.scenes.get(sid)
+        record = self.app.scenes.get(sid, self.session)
         if name not in record.files.values():
             raise RequestError(f"scene {sid} has no file {name!r}", 404)
         self._file(record.folder / name, download=name)
@@ -386,6 +387,7 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Cache-Control", "max-age=3600" if cache else "no-cache")
         if download:
             self.send_header("Content-Disposition", content_disposition(download))
+        self._session_cookie()
         self.end_headers()
         self.wfile.write(data)
 
@@ -395,8 +397,35 @@ class Handler(BaseHTTPRequestHandler):
         self.send_header("Content-Type", "application/json")
         self.send_header("Content-Length", str(len(data)))
         self.send_header("Cache-Control", "no-cache")
+        self._session_cookie()
         self.end_headers()
         self.wfile.write(data)
+
+    def _session_cookie(self) -> None:
+        if getattr(self, "_new_session", False):
+            self.send_header("Set-Cookie", f"{SESSION_COOKIE}={self.session}; Path=/; HttpOnly; "
+                             "SameSite=Strict")  # fmt: skip
+
+
+SESSION_COOKIE = "umf_session"
+_SESSION_RE = re.compile(r"[A-Za-z0-9_-]{32}")
+
+
+def read_session(cookie: str | None) -> tuple[str, bool]:
+    """(session id, whether it is new) from a Cookie header: each browser gets an
+    unguessable id, and sees only its own scenes and uploads."""
+    import secrets
+    from http.cookies import CookieError, SimpleCookie
+
+    jar = SimpleCookie()
+    try:
+        jar.load(cookie or "")
+    except CookieError:
+        pass
+    morsel = jar.get(SESSION_COOKIE)
+    if morsel is not None and _SESSION_RE.fullmatch(morsel.value):
+        return morsel.value, False
+    return secrets.token_urlsafe(24), True
 
 
 def content_disposition(name: str) -> str:
