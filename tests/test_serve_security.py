@@ -183,3 +183,51 @@ def test_each_browser_sees_only_its_own_scenes_and_uploads(tmp_path):
     with pytest.raises(RequestError):
         app.actors.get(aid, "B" * 32)
     assert app.actors.get(aid, "A" * 32) is not None
+
+
+def test_a_slow_client_is_cut_off_and_too_many_connections_are_refused(tmp_path, monkeypatch):
+    import socket
+    import time
+
+    import umf.serve.server as srv_mod
+
+    monkeypatch.setattr(srv_mod, "REQUEST_DEADLINE_S", 1.0)
+    monkeypatch.setattr(srv_mod.CappedServer, "max_connections", 3)
+    app = App(ModelHolder(_never), None, workdir=tmp_path)
+    srv = start_in_thread(app)
+    port = srv.server_address[1]
+    try:
+        slow = socket.create_connection(("127.0.0.1", port), timeout=10)
+        slow.sendall(b"GET /api/health HTTP/1.1\r\n")  # then a header, very slowly
+        begin = time.perf_counter()
+        closed = False
+        while time.perf_counter() - begin < 6:
+            try:
+                slow.sendall(b"X")
+                time.sleep(0.3)
+            except OSError:
+                closed = True
+                break
+            slow.settimeout(0.01)
+            try:
+                if slow.recv(1) == b"":
+                    closed = True
+                    break
+            except (TimeoutError, BlockingIOError):
+                pass
+            except OSError:
+                closed = True
+                break
+        assert closed and time.perf_counter() - begin < 4  # cut at the 1 s deadline
+        idle = [socket.create_connection(("127.0.0.1", port), timeout=10) for _ in range(3)]
+        time.sleep(0.2)
+        extra = socket.create_connection(("127.0.0.1", port), timeout=10)
+        answer = extra.recv(4096)
+        assert answer.startswith(b"HTTP/1.1 503") and b"too many connections" in answer
+        for s in idle:
+            s.close()
+        time.sleep(1.5)  # the idle ones are released (closed, or cut at the deadline)
+        assert ask(port, "GET", "/api/health")[0] == 200
+    finally:
+        srv.shutdown()
+        srv.server_close()

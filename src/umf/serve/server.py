@@ -44,6 +44,8 @@ STATIC = Path(__file__).parent / "static"
 MAX_JSON_BYTES = 64 * 1024
 MAX_UPLOAD_BYTES = 20 * 1024 * 1024
 READ_TIMEOUT_S = 30.0
+REQUEST_DEADLINE_S = 60.0  # to receive a whole request (line, headers, body), however slowly
+MAX_CONNECTIONS = 32  # open at once; more are answered 503 and closed
 MOTION_SUFFIXES = (".bvh", ".npz")
 _TYPES = {".js": "text/javascript", ".mjs": "text/javascript", ".glb": "model/gltf-binary",
           ".npz": "application/octet-stream", ".bvh": "text/plain", ".css": "text/css"}  # fmt: skip
@@ -181,6 +183,32 @@ class Handler(BaseHTTPRequestHandler):
     timeout = READ_TIMEOUT_S  # a client that stops sending is dropped
     app: App  # set on the subclass made by make_server
 
+    def handle_one_request(self) -> None:
+        """One request, received within REQUEST_DEADLINE_S in all: the 30 s timeout is per
+        read, so a client sending a byte every 10 s would otherwise hold a thread forever."""
+        self._deadline = threading.Timer(REQUEST_DEADLINE_S, self._cut_off)
+        self._deadline.daemon = True
+        self._deadline.start()
+        try:
+            super().handle_one_request()
+        finally:
+            self._deadline.cancel()
+
+    def _received(self) -> None:
+        """The whole request is in: the deadline no longer applies (generation may be slow)."""
+        deadline = getattr(self, "_deadline", None)
+        if deadline is not None:
+            deadline.cancel()
+
+    def _cut_off(self) -> None:
+        import socket
+
+        self.close_connection = True
+        try:
+            self.connection.shutdown(socket.SHUT_RDWR)
+        except OSError:
+            pass
+
     def log_message(self, format: str, *args: Any) -> None:
         if self.app.verbose:
             sys.stderr.write(f"umf serve: {self.address_string()} {format % args}\n")
@@ -223,6 +251,8 @@ class Handler(BaseHTTPRequestHandler):
             self._check_host()
             if method not in ("GET", "HEAD"):
                 self._check_origin()
+            else:
+                self._received()
             path = urlsplit(self.path).path
             route = self._route(method, path)
             if route is None:
@@ -315,6 +345,7 @@ class Handler(BaseHTTPRequestHandler):
             self.close_connection = True  # the rest of the body is not read
             raise RequestError(f"the request body is larger than {limit} bytes", 413)
         data = self.rfile.read(size)
+        self._received()
         if len(data) != size:
             raise RequestError("the request body ended early")
         return data
@@ -465,12 +496,41 @@ def _is_loopback(host: str) -> bool:
         return host == "localhost"
 
 
+class CappedServer(ThreadingHTTPServer):
+    """One thread per connection, at most ``MAX_CONNECTIONS`` at once: the next is answered
+    503 in one JSON line and closed, so a crowd of idle clients cannot exhaust threads."""
+
+    daemon_threads = True
+    max_connections = MAX_CONNECTIONS
+
+    def __init__(self, *args: Any, **kwargs: Any) -> None:
+        super().__init__(*args, **kwargs)
+        self._open = threading.BoundedSemaphore(self.max_connections)
+
+    def process_request(self, request: Any, client_address: Any) -> None:
+        if not self._open.acquire(blocking=False):
+            body = b'{"error":"too many connections; try again"}'
+            try:
+                request.sendall(b"HTTP/1.1 503 Service Unavailable\r\nContent-Type: "
+                                b"application/json\r\nConnection: close\r\nContent-Length: "
+                                + str(len(body)).encode() + b"\r\n\r\n" + body)  # fmt: skip
+            except OSError:
+                pass
+            self.shutdown_request(request)
+            return
+        super().process_request(request, client_address)
+
+    def process_request_thread(self, request: Any, client_address: Any) -> None:
+        try:
+            super().process_request_thread(request, client_address)
+        finally:
+            self._open.release()
+
+
 def make_server(app: App, host: str = "127.0.0.1", port: int = 8000) -> ThreadingHTTPServer:
     """A server bound to ``host:port`` (port 0: a free one) serving ``app``."""
     handler = type("UMFHandler", (Handler,), {"app": app})
-    server = ThreadingHTTPServer((host, port), handler)
-    server.daemon_threads = True
-    return server
+    return CappedServer((host, port), handler)
 
 
 def start_in_thread(app: App, host: str = "127.0.0.1", port: int = 0) -> ThreadingHTTPServer:
