@@ -21,7 +21,7 @@ from umf.scene import Scene
 
 FPS = 30.0
 MAX_NPZ_JOINTS_BYTES = 256 * 10**6  # 16 people x 10 min at 30 fps is 76 MB
-MAX_SECONDS = 3600.0  # a motion file longer than an hour is refused before it is resampled
+MAX_SECONDS = 600.0  # a motion file longer than 10 min is refused before it is resampled and fitted
 
 Motion = Scene  # what load_motion returned before scenes and motion files were one class
 
