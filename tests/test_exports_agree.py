@@ -26,6 +26,9 @@ from umf.skeleton import JOINT_NAMES, PARENTS
 
 ALL = [f for f in FORMATS if f != "mp4"]  # the MP4 writer is checked by spying (encoding costs)
 MM = 1e-3
+# the README's figure: every format agrees with scene.joints to 0.002 mm; a quarter more
+# margin. A bone offset 0.08 % long (0.7 mm) or a BVH written at 4 decimals fails it
+TOL = 0.0025 * MM
 BOW = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh"
 # SMPL's 24-joint tree (pelvis ... right hand), written out independently of umf
 SMPL_PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]
@@ -141,7 +144,7 @@ def test_bvh_agrees(written):
         order = [bvh.names.index(n) for n in JOINT_NAMES]
         worst = max(worst, np.abs(pos[:, order] - scene.joints[i]).max())
     _report(name, "bvh", worst)
-    assert worst < MM
+    assert worst < TOL
 
 
 def test_glb_agrees(written, tmp_path):
@@ -149,7 +152,7 @@ def test_glb_agrees(written, tmp_path):
     gltf = pygltflib.GLTF2().load(str(files[f"{name}.glb"]))
     err = np.abs(skin_joint_positions(gltf) - scene.joints).max()
     _report(name, "glb", err)
-    assert err < MM
+    assert err < TOL
     node, package = shutil.which("node"), _validator_package()
     if node is None or package is None:
         pytest.skip("Khronos glTF-Validator not available (see test_export_glb)")
@@ -214,7 +217,7 @@ def test_smpl_agrees(written):
     res = np.concatenate(residual)
     _report(name, "smpl (our bones)", worst)
     print(f"smpl mapping residual {name}: mean {res.mean() / MM:.1f} mm, max {res.max() / MM:.1f}")
-    assert worst < MM
+    assert worst < TOL
     assert res.mean() < 0.04 and res.max() < 0.08  # the hips' and collars' template offsets
 
 
@@ -242,4 +245,4 @@ def test_humanml3d_agrees(written):
         worst = max(worst, np.abs(fitted - b).max())
         assert abs(rot[1, 1] - 1) < 1e-6  # a turn about the vertical only
     _report(name, "humanml3d", worst)
-    assert worst < MM
+    assert worst < TOL
