@@ -50,6 +50,17 @@ def action_check(kind: str, j: np.ndarray) -> tuple[bool, float]:
     raise ValueError(kind)
 
 
+def closeness(joints: np.ndarray) -> dict:
+    """pair_closeness plus the body capsules' overlap (umf.eval.physics): mean depth over
+    frames and the fraction of frames deeper than 1 cm, person 2 against person 1."""
+    from umf.data.relations import pair_closeness
+    from umf.eval.physics import interpenetration
+
+    pen = interpenetration(joints[:2])[1]
+    return {**pair_closeness(joints), "penetration_cm": round(pen["penetration_cm"], 3),
+            "penetration_frac": round(pen["penetration_frac"], 3)}  # fmt: skip
+
+
 def salsa_pass(c: dict) -> bool:
     return c["hands_near"] >= 0.5 and 0.25 <= c["pelvis"] <= 1.0 and c["facing"] > 0.5
 
@@ -62,7 +73,6 @@ def main() -> None:
     ap.add_argument("--out", type=Path, default=None)
     args = ap.parse_args()
 
-    from umf.data.relations import pair_closeness
     from umf.pipeline import UMFPipeline
 
     pipe = UMFPipeline.from_pretrained(args.model)
@@ -73,7 +83,7 @@ def main() -> None:
     for s in seeds:
         (scene,) = pipe(SALSA, num_people=2, seconds=4.0, seed=s)
         for view, j in (("delivered", scene.joints), ("raw", scene.raw_joints)):
-            c = pair_closeness(np.asarray(j))
+            c = closeness(np.asarray(j))
             report["salsa"][view].append({**c, "pass": salsa_pass(c)})
         report.setdefault("salsa_coverage", scene.meta.get("coverage"))
     if args.corpus is not None:
@@ -84,9 +94,9 @@ def main() -> None:
         for c in corpus.clips:
             if c.meta.get("content") == "salsa" and c.split in ("test", "val"):
                 t = c.joints[:, : 4 * 30 + 1]  # the first 4 s, as generated
-                m = pair_closeness(c.joints)
+                m = closeness(c.joints)
                 report["salsa"]["real"].append({"id": c.id, "split": c.split, **m,
-                                                "first_4s": pair_closeness(t),
+                                                "first_4s": closeness(t),
                                                 "pass": salsa_pass(m)})  # fmt: skip
     for kind, prompt in ACTIONS.items():
         rows = []
@@ -103,11 +113,13 @@ def main() -> None:
         return float(np.median([r[k] for r in rows]))
 
     print(f"model {pipe.name}; {args.seeds} seeds, 4 s")
-    print("salsa            hands_near  pelvis/stature  facing  min joint (m)  passed")
+    print("salsa (medians)  hands_near  pelvis/stature  facing  min joint (m)  overlap (cm, "
+          "frames > 1 cm)  passed")
     for view, rows in report["salsa"].items():
         print(f"  {view:14s} {med(rows, 'hands_near'):10.2f} {med(rows, 'pelvis'):15.2f} "
               f"{med(rows, 'facing'):7.2f} {med(rows, 'min_joint_m'):14.3f}  "
-              f"{sum(r['pass'] for r in rows)}/{len(rows)}")
+              f"{med(rows, 'penetration_cm'):6.2f}, {med(rows, 'penetration_frac'):.2f}"
+              f"{'':14s}{sum(r['pass'] for r in rows)}/{len(rows)}")
     for kind, r in report["actions"].items():
         vals = ", ".join(f"{x['value']:.2f}" for x in r["seeds"])
         print(f"{kind:10s} delivered {r['passed']}/{args.seeds}, raw {r['raw_passed']}/{args.seeds}"
