@@ -212,7 +212,7 @@ def body_span(joints: np.ndarray) -> float:
     chain = (7, 4, 1, 0, 3, 6, 9, 12, 15)  # left ankle up the leg, then the spine to the head
     span = np.median(np.linalg.norm(np.diff(j[:, chain], axis=1), axis=-1).sum(-1))
     if not np.isfinite(span) or span <= 0:
-        raise UMFError("the motion has no extent (all joints at one point)")
+        raise UMFError("the motion has no extent (all joints at one point): not a body")
     return float(span)
 
 
