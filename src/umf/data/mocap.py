@@ -44,6 +44,11 @@ REFERENCE_JUMP = 0.06  # of the body's size: a first frame this far from the nex
 LOOP_SECONDS = 6.0  # a looping clip (DeepMimic "Loop": "wrap") is repeated up to this long
 
 
+class TakeMismatch(UMFError):
+    """The files of one take disagree (frame rate, length, unit): the library is wrong, so
+    ``prepare`` stops instead of skipping the take."""
+
+
 @dataclass
 class RawMotion:
     """One file's people in file units, before the unit is chosen (a take shares one)."""
@@ -153,7 +158,7 @@ def to_metres(raws: list[RawMotion]) -> tuple[list[np.ndarray], float, str]:
     when fixed, else chosen on all of them together)."""
     fixed = {r.unit for r in raws if r.unit is not None}
     if len(fixed) > 1:
-        raise UMFError("the files of one take have different units")
+        raise TakeMismatch("the files of one take have different units")
     if fixed:
         unit, how = fixed.pop(), "given"
     else:
@@ -300,7 +305,7 @@ def load_mocap(
                     raise
             clip = _clip(lib, key, members, raws, is_take, source)
         except UMFError as exc:
-            if problems is None or (is_take and "different" in str(exc)):
+            if problems is None or isinstance(exc, TakeMismatch):
                 raise
             where, reason = str(lib.root / key), str(exc).splitlines()[0]
             problems.append((where, reason.removeprefix(f"{where}: ")))
@@ -317,11 +322,11 @@ def _clip(lib: MocapLibrary, key: str, members, raws: list[RawMotion], is_take: 
 
     rates = {round(r.fps, 3) for r in raws}
     if len(rates) > 1:
-        raise UMFError(f"take {key!r}: its files have different frame rates "
+        raise TakeMismatch(f"take {key!r}: its files have different frame rates "
                        f"({', '.join(f'{r:g}' for r in sorted(rates))} fps)")  # fmt: skip
     lengths = [r.joints.shape[0] for r in raws]
     if max(lengths) - min(lengths) > MAX_TAKE_LENGTH_MISMATCH:
-        raise UMFError(f"take {key!r}: its files have different lengths "
+        raise TakeMismatch(f"take {key!r}: its files have different lengths "
                        f"({', '.join(map(str, lengths))} frames)")  # fmt: skip
     people, unit, how = to_metres(raws)
     t = min(lengths)
