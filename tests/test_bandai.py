@@ -112,3 +112,31 @@ def test_full_bandai_corpus_loads():
     problems: list = []
     n = sum(1 for _ in bandai.load_bandai(SHARED_BANDAI, problems))
     assert problems == [] and n == 3076
+
+
+def test_a_label_that_is_not_an_object_and_a_corrupt_inner_zip(tmp_path):
+    """A label file holding `5` reads as no label (the name carries the labels); a corrupt
+    zip inside a tar is one line naming it."""
+    import io
+    import shutil
+    import tarfile
+
+    from conftest import BANDAI_FIXTURE
+    from umf.data.bandai import load_bandai
+    from umf.errors import UMFError
+
+    src = tmp_path / "b"
+    shutil.copytree(BANDAI_FIXTURE, src)
+    label = next(src.rglob("dataset-1_bow_normal_001.json"))
+    label.write_text("5")
+    problems: list = []
+    clips = {c.id: c for c in load_bandai(src, problems)}
+    assert clips["dataset-1_bow_normal_001"].meta["content"] == "bow"
+    tar = tmp_path / "x.tar"
+    with tarfile.open(tar, "w") as tf:
+        data = b"PK\x03\x04 not a zip"
+        info = tarfile.TarInfo("inner/data.zip")
+        info.size = len(data)
+        tf.addfile(info, io.BytesIO(data))
+    with pytest.raises(UMFError, match="unreadable zip inside the archive"):
+        list(load_bandai(tar, []))

@@ -234,19 +234,25 @@ def iter_bandai_files(path: str | Path) -> Iterator[BandaiFile]:
                 if zpath.exists():
                     collect(_iter_members(zpath))
                 else:  # a zip inside an archive
-                    with zipfile.ZipFile(io.BytesIO(data)) as zf:
-                        collect(
-                            (f"{origin}:{i.filename}", zf.read(i))
-                            for i in zf.infolist()
-                            if i.filename.endswith((".bvh", ".json"))
-                        )
+                    try:
+                        with zipfile.ZipFile(io.BytesIO(data)) as zf:
+                            collect(
+                                (f"{origin}:{i.filename}", zf.read(i))
+                                for i in zf.infolist()
+                                if i.filename.endswith((".bvh", ".json"))
+                            )
+                    except (zipfile.BadZipFile, EOFError, OSError) as exc:
+                        raise UMFError(f"{origin}: unreadable zip inside the archive "
+                                       f"({type(exc).__name__})") from None  # fmt: skip
             elif ext == "bvh" and _NAME_RE.match(stem):
                 bvhs[stem] = (origin, data)
             elif ext == "json" and _NAME_RE.match(stem):
                 try:
-                    labels[stem] = json.loads(data.decode("utf-8"))
+                    label = json.loads(data.decode("utf-8"))
                 except (UnicodeDecodeError, json.JSONDecodeError):
-                    labels[stem] = None
+                    label = None
+                # a label must be an object ({"content": i, "style": j}); `5` or a list is none
+                labels[stem] = label if isinstance(label, dict) else None
 
     collect(_iter_members(path))
     for name in sorted(bvhs):
