@@ -126,7 +126,7 @@ def to_smpl22(pos: np.ndarray, rot: np.ndarray) -> np.ndarray:
 
 def is_deepmimic(text: str) -> bool:
     """A JSON document with a ``"Frames"`` list (cheap check before parsing)."""
-    return '"Frames"' in text[:4096] or '"Frames"' in text
+    return '"Frames"' in text
 
 
 def read_deepmimic(path: Path, text: str | None = None) -> tuple[np.ndarray, float, bool]:

@@ -201,7 +201,7 @@ class MotionVAE(nn.Module):
     def restate_body(self, body: Normalizer) -> None:
         """Adopt new body-frame statistics without changing what the VAE computes.
 
-        A VAE trained on people who stand sees a crawl's pelvis height 25 standard
+        A VAE trained on people who stand sees a crawl's pelvis height 23 standard
         deviations from its mean, further than fine-tuning at a safe learning rate can
         teach the decoder to reach. New statistics (fitted on the new corpus) put it a few
         deviations out, and the input and output projections absorb the change exactly:

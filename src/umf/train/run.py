@@ -28,6 +28,7 @@ from umf.checkpoint import (
 from umf.config import TrainConfig, UMFConfig, family_config, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
+from umf.io import write_json_atomic
 from umf.representation import Normalizer
 from umf.train.datasets import (
     MixedBatches,
@@ -524,8 +525,6 @@ def finetune(
             continue
         summary = train_stage(stage, corpus_dir, run_dir, cfg, launch, resume=resume,
                               init=model, own_vae=own_vae, log=log)  # fmt: skip
-        from umf.io import write_json_atomic
-
         write_json_atomic(done, {k: v for k, v in summary.items()
                                  if isinstance(v, int | float | str | None)})  # fmt: skip
         log(f"{stage}: {summary.get('steps')} steps in {summary.get('seconds', 0):.0f} s")
