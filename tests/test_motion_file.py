@@ -129,3 +129,40 @@ def test_a_zip_bomb_and_an_endless_motion_are_refused_before_they_are_read(tmp_p
     assert mf.MAX_SECONDS < 2000  # 2,000 frames at 1 fps: 60,000 frames once resampled
     with pytest.raises(UMFError, match="s of motion"):
         load_motion(tmp_path / "slow.npz")
+
+
+@pytest.mark.parametrize("fps", [30.0, 24.0, 60.0, 7.3])
+def test_a_resampled_window_is_the_window_of_the_resampled_motion(fps):
+    """resample(first, count) gives exactly the cut of the whole resample (bit for bit)
+    and reads only the input frames it needs: NaNs outside them stay out."""
+    from umf.data.bandai import resample, resampled_length
+
+    rng = np.random.default_rng(0)
+    j = rng.normal(size=(2, 300, 22, 3)).astype(np.float32)
+    full = resample(j, fps)
+    assert full.shape[1] == resampled_length(300, fps)
+    n = full.shape[1]
+    for first, count in [(0, 5), (17, 40), (n - 3, 10), (n, 4), (3, 1), (5, None)]:
+        end = None if count is None else first + count
+        assert np.array_equal(resample(j, fps, first=first, count=count), full[:, first:end])
+    lo, hi = int(17 * fps / 30), int(56 * fps / 30) + 2  # the input behind output 17..56
+    poisoned = np.full_like(j, np.nan)
+    poisoned[:, lo:hi] = j[:, lo:hi]
+    assert np.array_equal(resample(poisoned, fps, first=17, count=40), full[:, 17:57])
+
+
+def test_react_reads_a_window_of_a_long_file_as_the_whole_file_cut(tmp_path):
+    """A window of a 60 fps file (MotionFile.scene) is the same motion as the whole file
+    read and cut afterwards: the window costs only its frames."""
+    from umf.data.motion_file import open_motion
+
+    src = load_motion(BOW).joints[0]
+    _write(tmp_path / "bow60.bvh", np.repeat(src, 2, axis=0)[:-1], 1.0, 60.0)  # each frame twice
+    whole = load_motion(tmp_path / "bow60.bvh").joints
+    motion = open_motion(tmp_path / "bow60.bvh")
+    assert motion.frames == whole.shape[1] and motion.fps == pytest.approx(60.0)
+    part = motion.scene(20, 50).joints
+    assert part.shape == (1, 50, 22, 3)
+    np.testing.assert_allclose(part, whole[:, 20:70], atol=2e-4)
+    with pytest.raises(UMFError, match="no motion from frame"):
+        motion.scene(whole.shape[1] - 1, 10)

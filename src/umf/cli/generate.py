@@ -191,7 +191,7 @@ def react(
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
 ) -> None:
     """Your own motion as person 1; the model generates the others around it."""
-    from umf.data.motion_file import FPS, load_motion
+    from umf.data.motion_file import FPS, open_motion
 
     wanted = parse_formats(formats)
     req = check_request(prompt, people, seed=seed, guidance=guidance, sflow_steps=sflow_steps)
@@ -207,26 +207,25 @@ def react(
         out / (f"react-{_slug(prompt)}" + (f"-{j}" if batch > 1 else "")) for j in range(batch)
     ]
     check_targets([p for stem in stems for p in scene_targets(stem, wanted, req.num_people)])
-    motion = load_motion(actor)
-    if not 1 <= actor_person <= motion.num_people:
-        raise UMFError(f"{actor}: has {motion.num_people} people, no person {actor_person}")
-    joints = motion.joints[actor_person - 1]
-    first = round(start * FPS)
-    if not 0 <= first < joints.shape[0]:
-        raise UMFError(
-            f"--start {start} s is outside the actor motion ({joints.shape[0] / FPS:.1f} s)"
-        )
-    if seconds is not None and first + round(seconds * FPS) + 1 > joints.shape[0]:
-        left = (joints.shape[0] - 1 - first) / FPS
-        raise UMFError(f"--seconds {seconds}: the actor motion has only {left:.1f} s after --start")
     config = peek_config(model)
     most = (config.vae.max_frames if config is not None else 300) + 1
     count = most if seconds is None else round(seconds * FPS) + 1
-    joints = joints[first : first + count]
+    first = round(start * FPS)
+    motion = open_motion(actor)  # read and checked, not yet resampled or fitted
+    if not 1 <= actor_person <= motion.num_people:
+        raise UMFError(f"{actor}: has {motion.num_people} people, no person {actor_person}")
+    total = motion.frames
+    if not 0 <= first < total:
+        raise UMFError(f"--start {start} s is outside the actor motion ({total / FPS:.1f} s)")
+    if seconds is not None and first + count > total:
+        left = (total - 1 - first) / FPS
+        raise UMFError(f"--seconds {seconds}: the actor motion has only {left:.1f} s after --start")
+    # the window is cut before the resampling and the body fit: a long file costs its window
+    joints = motion.scene(first, count).joints[actor_person - 1]
     if config is not None:
         check_actor(joints, FPS, config.vae.max_frames)
     pipe = load_pipeline(model)
-    if seconds is None and motion.num_frames - first > most:
+    if seconds is None and total - first > most:
         end = start + most / FPS
         typer.echo(f"note: the actor motion is longer than {most / FPS:.1f} s; using "
                    f"{start:.1f}-{end:.1f} s (--start/--seconds choose)")  # fmt: skip

@@ -273,21 +273,45 @@ def retarget_to_smpl22(positions_cm: np.ndarray, names: list[str]) -> np.ndarray
     return (np.stack(cols, axis=1) / 100.0).astype(np.float32)
 
 
-def resample(joints: np.ndarray, fps_in: float, fps_out: float = FPS) -> np.ndarray:
-    """Linear resampling of (P, T, 22, 3) joints over time; identity when rates agree."""
+def resampled_length(frames: int, fps_in: float, fps_out: float = FPS) -> int:
+    """How many frames :func:`resample` makes of ``frames`` at ``fps_in``: every output
+    time within the input's duration."""
     if abs(fps_in - fps_out) < 1e-3:
-        return joints
+        return frames
+    return int(np.floor((frames - 1) / fps_in * fps_out + 1e-6)) + 1
+
+
+def resample(
+    joints: np.ndarray,
+    fps_in: float,
+    fps_out: float = FPS,
+    first: int = 0,
+    count: int | None = None,
+) -> np.ndarray:
+    """Linear resampling of (P, T, 22, 3) joints over time; identity when rates agree.
+
+    ``first`` and ``count`` (output frames) return only that window of the result, the same
+    values as cutting it afterwards, but reading only the input frames it needs: a long file
+    costs what its window costs."""
     t_in = joints.shape[1]
-    duration = (t_in - 1) / fps_in
-    t_out = int(np.floor(duration * fps_out + 1e-6)) + 1
-    x = torch.from_numpy(joints).permute(0, 2, 3, 1).reshape(1, -1, t_in)
-    src = torch.arange(t_out, dtype=torch.float64) * (fps_in / fps_out)
+    same = abs(fps_in - fps_out) < 1e-3
+    t_out = resampled_length(t_in, fps_in, fps_out)
+    if first == 0 and count is None and same:
+        return joints
+    first = min(max(first, 0), t_out)
+    count = t_out - first if count is None else max(0, min(count, t_out - first))
+    if same or count == 0:
+        return joints[:, first : first + count]
+    src = (torch.arange(count, dtype=torch.float64) + first) * (fps_in / fps_out)
     lo = src.floor().long().clamp(max=t_in - 1)
     hi = (lo + 1).clamp(max=t_in - 1)
+    start, stop = int(lo[0]), int(hi[-1]) + 1
+    part = np.ascontiguousarray(joints[:, start:stop])
+    x = torch.from_numpy(part).permute(0, 2, 3, 1).reshape(1, -1, stop - start)
     w = (src - lo).to(x.dtype)
-    out = x[..., lo] * (1 - w) + x[..., hi] * w
+    out = x[..., lo - start] * (1 - w) + x[..., hi - start] * w
     p = joints.shape[0]
-    return out.reshape(p, 22, 3, t_out).permute(0, 3, 1, 2).contiguous().numpy()
+    return out.reshape(p, 22, 3, count).permute(0, 3, 1, 2).contiguous().numpy()
 
 
 def load_clip(f: BandaiFile, n_captions: int = 4) -> MotionClip:

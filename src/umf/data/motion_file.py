@@ -11,6 +11,7 @@ which leaves a rigid skeleton's joints as they are), so it can be written in any
 
 from __future__ import annotations
 
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -61,11 +62,42 @@ def _load_bvh(path: Path) -> tuple[np.ndarray, float]:
     return joints[None].astype(np.float32), raw.fps
 
 
-def load_motion(path: str | Path) -> Scene:
-    """Every person in ``path`` (.npz or .bvh) as a scene in metres at 30 fps;
-    ``meta["source_fps"]`` is the file's frame rate, ``meta["source"]`` its path."""
-    from umf.data.bandai import resample
+@dataclass
+class MotionFile:
+    """A motion file as read and checked, before resampling: ``joints`` (P, T, 22, 3) in
+    metres at the file's ``fps``. :meth:`scene` makes the 30 fps scene of a window of it."""
 
+    joints: np.ndarray
+    text: str
+    fps: float
+    meta: dict
+
+    @property
+    def num_people(self) -> int:
+        return int(self.joints.shape[0])
+
+    @property
+    def frames(self) -> int:
+        """Its length at 30 fps."""
+        from umf.data.bandai import resampled_length
+
+        return resampled_length(self.joints.shape[1], self.fps, FPS)
+
+    def scene(self, first: int = 0, count: int | None = None) -> Scene:
+        """Frames ``first`` .. ``first + count`` at 30 fps as a scene, the window cut before
+        the resampling and the body fit, so a long file costs what the window costs."""
+        from umf.data.bandai import resample
+
+        joints = resample(self.joints, self.fps, FPS, first=first, count=count)
+        if joints.shape[1] < 2:
+            raise UMFError(f"{self.meta['source']}: no motion from frame {first} on "
+                           f"({self.frames} frames at {FPS:g} fps)")  # fmt: skip
+        return Scene(np.ascontiguousarray(joints), None, self.text, FPS, meta=dict(self.meta))
+
+
+def open_motion(path: str | Path) -> MotionFile:
+    """Read and check ``path`` (.npz or .bvh): every person, in metres, at its own rate.
+    ``meta["source_fps"]`` is the file's frame rate, ``meta["source"]`` its path."""
     path = Path(path)
     if not path.is_file():
         raise UMFError(f"motion file not found: {path}")
@@ -89,5 +121,10 @@ def load_motion(path: str | Path) -> Scene:
         unit, name = choose_unit(joints)
         if name not in ("m", "stature"):
             joints, meta["converted_from"] = joints * unit, name
-    joints = resample(np.ascontiguousarray(joints, dtype=np.float32), fps, FPS)
-    return Scene(joints, None, text, FPS, meta=meta)
+    return MotionFile(np.ascontiguousarray(joints, dtype=np.float32), text, fps, meta)
+
+
+def load_motion(path: str | Path) -> Scene:
+    """Every person in ``path`` (.npz or .bvh) as a scene in metres at 30 fps
+    (:func:`open_motion`, then all of it resampled)."""
+    return open_motion(path).scene()
