@@ -118,7 +118,10 @@ def open_motion(path: str | Path) -> MotionFile:
                        f"most {MAX_SECONDS:.0f} s")  # fmt: skip
     meta = {"source_fps": fps, "source": str(path)}
     if path.suffix.lower() == ".npz":  # metres by the format; an adult's size says otherwise
-        unit, name = choose_unit(joints)
+        try:
+            unit, name = choose_unit(joints)
+        except UMFError as exc:
+            raise UMFError(f"{path}: {exc}") from None
         if name not in ("m", "stature"):
             joints, meta["converted_from"] = joints * unit, name
     return MotionFile(np.ascontiguousarray(joints, dtype=np.float32), text, fps, meta)

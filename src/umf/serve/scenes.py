@@ -242,7 +242,7 @@ class SceneStore:
 
 
 class ActorStore:
-    """Uploaded motions (``load_motion`` results) by id, for react mode."""
+    """Uploaded motions (``open_motion`` results, not yet resampled) by id, for react."""
 
     def __init__(self, limit: int = MAX_ACTORS) -> None:
         self.limit = limit

@@ -132,17 +132,20 @@ class App:
         if req.actor_person > motion.num_people:
             raise RequestError(f"the uploaded motion has {motion.num_people} people, "
                                f"no person {req.actor_person}")  # fmt: skip
-        joints = motion.joints[req.actor_person - 1]
         first = round(req.start * FPS)
-        if first >= joints.shape[0]:
+        if first >= motion.frames:
             raise RequestError(f"'start' {req.start:g} s is outside the uploaded motion "
-                               f"({joints.shape[0] / FPS:.1f} s)")  # fmt: skip
+                               f"({motion.frames / FPS:.1f} s)")  # fmt: skip
         count = min(round(req.seconds * FPS) + 1, pipe.config.vae.max_frames + 1)
-        return joints[first : first + count]
+        try:  # only the window is resampled and fitted (a long upload costs its window)
+            return motion.scene(first, count).joints[req.actor_person - 1]
+        except UMFError as exc:
+            raise RequestError(str(exc)) from None
 
     def upload(self, name: str, data: bytes, session: str | None = None) -> dict[str, Any]:
-        """An actor motion (.bvh/.npz) read by ``load_motion``; returns its id for react."""
-        from umf.data.motion_file import FPS, load_motion
+        """An actor motion (.bvh/.npz) read and checked by ``open_motion`` and kept as read
+        (resampled and fitted only for the window a react asks for); returns its id."""
+        from umf.data.motion_file import FPS, open_motion
 
         suffix = Path(name).suffix.lower()
         if suffix not in MOTION_SUFFIXES:
@@ -153,7 +156,7 @@ class App:
         try:
             with os.fdopen(fd, "wb") as fh:
                 fh.write(data)
-            motion = load_motion(tmp)
+            motion = open_motion(tmp)
         except UMFError as exc:
             raise RequestError(str(exc).replace(tmp, Path(name).name)) from None
         except Exception as exc:  # a parser failing on garbage is still the file's fault
@@ -163,7 +166,7 @@ class App:
             Path(tmp).unlink(missing_ok=True)
         aid = self.actors.add(motion, session)
         return {"actor": aid, "name": Path(name).name, "people": motion.num_people,
-                "frames": motion.num_frames, "seconds": round(motion.num_frames / FPS, 3),
+                "frames": motion.frames, "seconds": round(motion.frames / FPS, 3),
                 "text": motion.text}  # fmt: skip
 
 
