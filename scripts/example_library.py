@@ -41,7 +41,7 @@ TAKE = ("call-and-answer", ["One person calls out and the other answers.",
 
 def write_mixamo(path: Path, joints: np.ndarray, fps: float) -> None:
     """SMPL-22 joints (T, 22, 3) in metres as a Mixamo-named BVH in centimetres."""
-    from umf.data.bvh import write_bvh
+    from umf.bvh import write_bvh
     from umf.data.skeletons import SKELETONS
     from umf.skeleton import PARENTS, fit_offsets, inverse_kinematics
 

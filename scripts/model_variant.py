@@ -24,8 +24,7 @@ from pathlib import Path
 
 from umf.config import UMFConfig, set_option
 from umf.errors import UMFError
-from umf.pipeline import UMFPipeline
-from umf.validation import check_model_config
+from umf.pipeline import UMFPipeline, check_model_config
 
 
 def write_variant(src: Path, dst: Path, options: list[str], name: str | None = None) -> Path:

@@ -15,10 +15,14 @@ torch.set_num_threads(2)
 
 
 def load_script(name: str):
-    """A module of ``scripts/`` (not a package), imported from its file for testing."""
+    """A module of ``scripts/`` or ``research/`` (not packages), imported from its file for
+    testing."""
     import importlib.util
 
-    path = Path(__file__).resolve().parents[1] / "scripts" / f"{name}.py"
+    root = Path(__file__).resolve().parents[1]
+    path = root / "scripts" / f"{name}.py"
+    if not path.exists():
+        path = root / "research" / f"{name}.py"
     spec = importlib.util.spec_from_file_location(name, path)
     mod = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(mod)

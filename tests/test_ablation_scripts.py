@@ -14,7 +14,7 @@ RESULTS = ROOT / "results" / "ablations"
 
 
 def test_ablations_driver_is_valid_bash():
-    subprocess.run(["bash", "-n", str(ROOT / "scripts" / "ablations.sh")], check=True)
+    subprocess.run(["bash", "-n", str(ROOT / "research" / "ablations.sh")], check=True)
 
 
 def fid_cell(report: Path, name: str) -> str:
@@ -40,7 +40,7 @@ def test_tables_are_rebuilt_from_the_reports(tmp_path):
                    "100,val,mpjpe_m,0.5,10\n100,val,mpjpe_pose_m,0.09,10\n"
                    "200,val,mpjpe_m,0.25,20\n200,val,mpjpe_pose_m,0.031,20\n")  # fmt: skip
     (tmp_path / "notes.md").write_text("## Reading\n\nhand-written text")
-    r = subprocess.run([sys.executable, str(ROOT / "scripts" / "ablation_tables.py"),
+    r = subprocess.run([sys.executable, str(ROOT / "research" / "ablation_tables.py"),
                         str(tmp_path)], capture_output=True, text=True)  # fmt: skip
     assert r.returncode == 0, r.stderr
     text = (tmp_path / "README.md").read_text()

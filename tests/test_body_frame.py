@@ -17,8 +17,7 @@ from umf.body_frame import (
     from_body_frame,
     to_body_frame,
 )
-from umf.representation import joints_to_features
-from umf.train.datasets import place_features
+from umf.representation import joints_to_features, place_features
 
 
 @pytest.fixture(scope="module")

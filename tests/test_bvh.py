@@ -18,7 +18,7 @@ import torch
 
 from conftest import BANDAI_FIXTURE
 from umf import skeleton
-from umf.data.bvh import (
+from umf.bvh import (
     forward_kinematics,
     local_transforms,
     parse_bvh,
@@ -383,7 +383,7 @@ def test_missing_file_and_stream_names(tmp_path: Path) -> None:
 def test_a_tiny_file_cannot_make_the_reader_allocate_much():
     """Frames: N with no channels held no motion but cost N frames of work downstream; a
     frame count past the cap is refused before anything is read."""
-    from umf.data.bvh import MAX_FRAMES, parse_bvh
+    from umf.bvh import MAX_FRAMES, parse_bvh
     from umf.errors import UMFError
 
     head = "HIERARCHY\nROOT a\n{\n  OFFSET 0 0 0\n"

@@ -132,7 +132,7 @@ def test_bad_inputs():
 def test_prepare_with_humanml3d_and_interhuman(tmp_path, bandai_clips):
     """All three adapters feed one corpus; dataset splits are kept, bad items reported."""
     from test_interhuman import make_root, write_scene
-    from umf.data.humanml3d import encode_joints
+    from umf.humanml3d import encode_joints
 
     ih = make_root(tmp_path / "InterHuman")
     for item in ("1", "2"):

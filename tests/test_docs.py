@@ -12,7 +12,7 @@ import pytest
 ROOT = Path(__file__).resolve().parents[1]
 CARD = ROOT / "src" / "umf" / "assets" / "model" / "README.md"
 PAGES = [ROOT / "README.md", ROOT / "CHANGELOG.md", *sorted((ROOT / "docs").glob("*.md")), CARD,
-         ROOT / "data" / "mocap" / "README.md"]  # fmt: skip
+         ROOT / "data" / "mocap" / "README.md", ROOT / "research" / "README.md"]  # fmt: skip
 LINK = re.compile(r"\[[^\]]*\]\(([^)\s]+)\)")
 
 

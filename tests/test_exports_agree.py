@@ -131,7 +131,7 @@ def test_npz_agrees(written):
 
 def test_bvh_agrees(written):
     """bvhio (every 6th frame and the last) and umf's own reader (every frame)."""
-    from umf.data.bvh import forward_kinematics, read_bvh
+    from umf.bvh import forward_kinematics, read_bvh
 
     name, scene, files = written
     frames = [*range(0, scene.num_frames, 6), scene.num_frames - 1]
@@ -224,7 +224,7 @@ def test_smpl_agrees(written):
 def test_humanml3d_agrees(written):
     """HumanML3D's decoding of the vectors gives ``new_joints``, which are the scene's
     joints resampled to 20 fps and moved rigidly into HumanML3D's canonical frame."""
-    from umf.data.humanml3d import recover_joints
+    from umf.humanml3d import recover_joints
 
     name, scene, files = written
     worst = 0.0

@@ -9,18 +9,15 @@ import numpy as np
 import pytest
 import torch
 
-from umf.data.humanml3d import (
-    Caption,
-    SkippedItemWarning,
+from umf.data.humanml3d import Caption, SkippedItemWarning, load_humanml3d, parse_caption_line
+from umf.errors import UMFError
+from umf.humanml3d import (
     canonicalize_first_frame,
     encode_joints,
-    load_humanml3d,
-    parse_caption_line,
     recover_joints,
     resample,
     resampled_length,
 )
-from umf.errors import UMFError
 from umf.representation import heading_angle, mirror_joints
 from umf.rotations import axis_angle_to_matrix, yaw_matrix
 from umf.skeleton import default_offsets, forward_kinematics

@@ -16,16 +16,10 @@ import pytest
 from umf.data.deepmimic import FRAME_WIDTH, HUMANOID3D, forward_kinematics, read_deepmimic
 from umf.data.mocap import load_mocap, read_motion, scan_library, tile_loop
 from umf.data.relations import facing_dirs, pair_closeness
-from umf.data.skeletons import (
-    NOMINAL_SPAN,
-    SKELETONS,
-    body_span,
-    choose_unit,
-    normal_name,
-    recognise,
-)
+from umf.data.skeletons import SKELETONS, normal_name, recognise
 from umf.errors import UMFError
 from umf.skeleton import JOINT_NAMES
+from umf.units import NOMINAL_SPAN, body_span, choose_unit
 
 SHARED = Path(__file__).resolve().parents[2] / "shared" / "data"
 

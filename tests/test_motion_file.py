@@ -7,11 +7,11 @@ import pytest
 import torch
 
 from conftest import BANDAI_FIXTURE
-from umf.data.bvh import write_smpl22_bvh
+from umf.bvh import write_smpl22_bvh
 from umf.data.motion_file import load_motion
-from umf.data.skeletons import choose_unit
 from umf.errors import UMFError
 from umf.skeleton import fit_offsets, inverse_kinematics
+from umf.units import choose_unit
 
 BOW = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow_normal_001.bvh"
 

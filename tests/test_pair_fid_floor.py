@@ -1,4 +1,4 @@
-"""scripts/pair_fid_floor.py: moving a person to another's start is one rigid floor motion."""
+"""research/pair_fid_floor.py: moving a person to another's start is one rigid floor motion."""
 
 from __future__ import annotations
 
@@ -13,8 +13,8 @@ from umf.representation import (
     features_to_joints,
     heading_angle,
     joints_to_rot6d,
+    place_features,
 )
-from umf.train.datasets import place_features
 
 
 def test_start_as_puts_the_first_frame_on_the_reference_and_keeps_the_pose(real_joints):

@@ -1,4 +1,4 @@
-"""scripts/prompt_stats.py: per-prompt medians of the motion statistics."""
+"""research/prompt_stats.py: per-prompt medians of the motion statistics."""
 
 from __future__ import annotations
 

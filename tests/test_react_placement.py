@@ -1,4 +1,4 @@
-"""scripts/react_placement.py: the per-frame gap on motions whose answer is known."""
+"""research/react_placement.py: the per-frame gap on motions whose answer is known."""
 
 from __future__ import annotations
 

@@ -134,3 +134,12 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     assert missing.returncode != 0 and "no corpus at" in missing.stderr
     assert "Traceback" not in missing.stderr
+
+
+def test_every_script_a_stage_runs_exists(tmp_path):
+    """The stages run other scripts by path (model_variant and the GPU driver): each one is
+    there, among the maintainer's tools of scripts/."""
+    commands = [c for st in _script().stages(tmp_path, Path("out/corpus")) for c in st.commands]
+    paths = [Path(a) for c in commands for a in c if a.endswith((".py", ".sh"))]
+    assert {p.parent.name for p in paths} == {"scripts"}
+    assert all(p.is_file() for p in paths), [p for p in paths if not p.is_file()]

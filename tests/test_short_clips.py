@@ -1,4 +1,4 @@
-"""scripts/short_clips.py: which short clips the dataset extends, per label."""
+"""research/short_clips.py: which short clips the dataset extends, per label."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""scripts/speed_over_time.py: per-second speeds of generated people."""
+"""research/speed_over_time.py: per-second speeds of generated people."""
 
 from __future__ import annotations
 

@@ -381,7 +381,7 @@ def test_respell_prompt_keeps_case_and_whole_words():
 
 def test_respell_config_is_checked():
     from umf.config import set_option, small_config
-    from umf.validation import check_config_values
+    from umf.model_checks import check_config_values
 
     cfg = small_config()
     check_config_values(set_option(cfg, "text.respell=[backward=backwards]"))

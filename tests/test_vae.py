@@ -322,7 +322,7 @@ def test_fusion_weights_are_checked_and_old_configs_keep_their_decoding():
     everything at its own root_fusion, not at the new defaults."""
     from umf.config import UMFConfig, set_option, small_config
     from umf.errors import UMFError
-    from umf.validation import check_config_values
+    from umf.model_checks import check_config_values
 
     cfg = small_config()
     for bad in ("vae.root_fusion=0", "vae.reaction_root_fusion=0", "vae.height_fusion=-1",

@@ -1,4 +1,4 @@
-"""scripts/vae_root_drift.py: the drift measures of one person's features."""
+"""research/vae_root_drift.py: the drift measures of one person's features."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""scripts/wave_latent.py: how a latent changes along time, and a swing's frequency."""
+"""research/wave_latent.py: how a latent changes along time, and a swing's frequency."""
 
 from __future__ import annotations
 

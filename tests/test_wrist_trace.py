@@ -1,4 +1,4 @@
-"""scripts/wrist_trace.py and the wave statistics on the committed real wave clip."""
+"""research/wrist_trace.py and the wave statistics on the committed real wave clip."""
 
 from __future__ import annotations
 

@@ -36,9 +36,9 @@ from safetensors import SafetensorError
 from safetensors.torch import load_file, save_file
 from torch import nn
 
-from umf import __version__
 from umf.errors import UMFError
 from umf.representation import Normalizer
+from umf.version import __version__
 
 FORMAT = "umf-checkpoint"
 FORMAT_VERSION = 1

@@ -8,6 +8,7 @@ one YAML override away (see ``umf train --set``).
 from __future__ import annotations
 
 import dataclasses
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -51,7 +52,7 @@ class VAEConfig:
     # The pelvis's floor path trusts the decoded velocities for seconds: the decoded
     # absolute path jitters by centimetres every frame and drifts slowly (real wavers
     # reconstructed by the bundled VAE travel 0.125 m/s net at 0.005, 0.072 at 0.0002, real
-    # 0.002; walks 1.16 and 1.27 m/s, real 1.26: scripts/vae_root_drift.py). Chosen on the
+    # 0.002; walks 1.16 and 1.27 m/s, real 1.26: research/vae_root_drift.py). Chosen on the
     # val split (results/umf-small-bandai-20261127): single-person FID 19.0 -> 10.3,
     # two-person 34.2 -> 24.9
     root_fusion: float = 0.0002
@@ -445,3 +446,12 @@ def family_config(name: str) -> UMFConfig:
     if name == "small":
         return small_config()
     raise UMFError(f"unknown config family {name!r} (choose paper or small)")
+
+
+def metadata_pairs(values: Sequence[str], where: str = "caption_mix_from") -> list[list[str]]:
+    """``["style=normal", ...]`` as [key, value] pairs; a one-line error for anything else
+    (the config check and the dataset both read the option through this)."""
+    pairs = [v.split("=", 1) for v in values]
+    if any(len(pair) != 2 or not pair[0] for pair in pairs):
+        raise UMFError(f"{where} takes key=value pairs (e.g. style=normal), got {list(values)}")
+    return pairs

@@ -9,7 +9,7 @@ the words that count people from both sides was tried and separates worse: AUC 0
 0.968 on the calibration lists.)
 
 The threshold is calibrated on paraphrases of trained actions against actions no bundled
-corpus has (``scripts/calibrate_coverage.py``; precision and recall in docs/model.md).
+corpus has (``research/calibrate_coverage.py``; precision and recall in docs/model.md).
 """
 
 from __future__ import annotations
@@ -27,7 +27,7 @@ from umf.io import save_tensors_atomic, write_json_atomic
 
 VOCABULARY_JSON = "vocabulary.json"
 VOCABULARY_TENSORS = "vocabulary.safetensors"
-THRESHOLD = 0.714  # calibrated on the bundled corpus: scripts/calibrate_coverage.py, docs/model.md
+THRESHOLD = 0.714  # calibrated on the bundled corpus: research/calibrate_coverage.py, docs/model.md
 NEAREST = 3
 
 

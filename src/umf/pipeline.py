@@ -17,6 +17,7 @@ from __future__ import annotations
 import json
 from collections.abc import Sequence
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 import torch
@@ -25,6 +26,12 @@ from umf.anchoring import anchor_people
 from umf.config import UMFConfig
 from umf.errors import UMFError
 from umf.kinematics import Bodies, fit_bodies
+from umf.model_checks import (
+    MAX_MODEL_BYTES,
+    check_config_values,
+    check_model_weights,
+    check_weight_shapes,
+)
 from umf.models.denoiser import FROM_CONFIG
 from umf.representation import (
     CONTACT,
@@ -45,15 +52,11 @@ from umf.validation import (
     MAX_PEOPLE,
     Request,
     check_actor,
-    check_config_values,
     check_finite,
     check_for_model,
-    check_model_weights,
     check_request,
-    check_weight_shapes,
     chunk_size,
     chunks,
-    dry_run_build,
 )
 
 __all__ = ["MAX_PEOPLE", "Scene", "UMFPipeline", "default_model_dir"]  # Scene: umf.scene
@@ -454,3 +457,45 @@ def delivered_joints(
     """
     _, bodies = clean_up(np.asarray(raw), np.asarray(contacts), floor, True, anchor)
     return bodies.joints()
+
+
+class _TextDim:
+    """Stands in for the text encoder where only its width matters (dry-run builds)."""
+
+    def __init__(self, dim: int) -> None:
+        self.dim = dim
+
+
+def dry_run_build(config: Any, text_dim: int = 384) -> dict[str, Any]:
+    """Build VAE, P-Flow and S-Flow on the ``meta`` device (no memory) and return them.
+
+    Catches configs that cannot be built (heads not dividing widths, token counts the
+    pyramid cannot halve ...) and ones too big to allocate, before anything is allocated.
+    """
+    try:
+        with torch.device("meta"):
+            norm = Normalizer(torch.zeros(262), torch.ones(262))
+            pipe = UMFPipeline.build(config, norm, _TextDim(text_dim))
+    except UMFError:
+        raise
+    except Exception as exc:  # construction raises many types for bad sizes
+        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
+        raise UMFError(f"the model config cannot be built: {msg}") from exc
+    modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
+    total = sum(
+        t.numel() * t.element_size()
+        for m in modules.values()
+        for t in [*m.parameters(), *m.buffers()]
+    )
+    if total > MAX_MODEL_BYTES:
+        raise UMFError(
+            f"the model config describes {total / 2**30:.1f} GiB of weights "
+            f"(at most {MAX_MODEL_BYTES / 2**30:.0f} GiB)"
+        )
+    return modules
+
+
+def check_model_config(config: Any, text_dim: int = 384) -> dict[str, Any]:
+    """Values first (types, ranges), then a dry-run build; returns the meta modules."""
+    check_config_values(config)
+    return dry_run_build(config, text_dim)

@@ -313,3 +313,37 @@ class Normalizer:
         if set(d) != {"mean", "std"} or d["mean"].shape != (FEATURE_DIM,):
             raise ValueError(f"{path}: not a umf normaliser file")
         return cls(d["mean"], d["std"])
+
+
+def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) -> Tensor:
+    """Turn people about +Y by ``yaw`` (rad) around the origin, then move them by (dx, dz).
+
+    Only positions and velocities change: local rotations exclude the root and contacts
+    depend on heights and speeds, both invariant to a rigid motion on the floor. Same
+    convention as :func:`umf.data.scenes.yaw_rotate` (+Z turns to (sin, 0, cos)).
+    Works on (..., T, 262) and matches features recomputed from the moved joints.
+    """
+    lead = features.shape[:-1]
+    rot = yaw_matrix(torch.as_tensor(yaw, dtype=features.dtype)).to(features.device)
+    shift = torch.tensor([dx, 0.0, dz], dtype=features.dtype, device=features.device)
+    pos = features[..., POS].reshape(*lead, 22, 3) @ rot.T + shift
+    vel = features[..., VEL].reshape(*lead, 22, 3) @ rot.T
+    return torch.cat(
+        [pos.reshape(*lead, 66), vel.reshape(*lead, 66), features[..., VEL.stop :]], dim=-1
+    )
+
+
+def canonicalize_features(features: Tensor) -> Tensor:
+    """Express people (P, T, 262) (or one person (T, 262)) in person 1's frame at frame 0.
+
+    Person 1's first-frame pelvis goes over the origin (XZ only; heights are kept) and
+    person 1's first-frame facing direction turns to +Z; everyone moves with them, so
+    relative placements are unchanged.
+    """
+    first = features if features.ndim == 2 else features[0]
+    joints0 = features_to_joints(first[0])
+    yaw = -heading_angle(joints0)
+    rot = yaw_matrix(yaw)
+    origin = torch.stack([joints0[0, 0], joints0.new_zeros(()), joints0[0, 2]])
+    shift = -(rot @ origin)
+    return place_features(features, yaw, float(shift[0]), float(shift[2]))

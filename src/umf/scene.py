@@ -125,8 +125,7 @@ class Scene:
         ``out/bow`` (a known suffix like ``.npz`` is dropped): ``out/bow.npz``,
         ``out/bow-p1.bvh`` ... Returns the paths written.
         """
-        from umf.exports import stem_of
-        from umf.validation import check_formats
+        from umf.exports import check_formats, stem_of
         from umf.writer import write_scene_files
 
         wanted = check_formats(formats if isinstance(formats, str) else ",".join(formats))

@@ -7,7 +7,6 @@ sampling. The bounds are documented in the README ("Generate"); change both toge
 
 from __future__ import annotations
 
-import dataclasses
 import math
 import numbers
 import os
@@ -20,7 +19,6 @@ from typing import Any
 import numpy as np
 
 from umf.errors import UMFError
-from umf.exports import FORMATS as EXPORT_FORMATS
 
 MAX_PEOPLE = 16
 MIN_SECONDS, MAX_SECONDS = 0.5, 10.0
@@ -34,7 +32,6 @@ MAX_PROMPT_CHARS = 1000
 # 16 people x 10 s); the result does not depend on the chunking (per-scene random streams).
 CHUNK_PERSON_FRAMES = 16 * 16 * 300
 MIN_BODY_EXTENT = 0.2  # metres: a motion smaller than this in every axis is not a body
-FORMATS = tuple(EXPORT_FORMATS)  # npz, bvh, glb, gif, mp4, smpl, humanml3d
 
 
 @dataclass(frozen=True)
@@ -185,14 +182,6 @@ def check_batch(batch: Any, prompts: int) -> int:
     return batch
 
 
-def check_formats(formats: str) -> list[str]:
-    wanted = [f.strip().lower() for f in formats.split(",") if f.strip()]
-    bad = [f for f in wanted if f not in FORMATS]
-    if bad or not wanted:
-        raise UMFError(f"unknown format {','.join(bad) or formats!r}; choose from {FORMATS}")
-    return list(dict.fromkeys(wanted))
-
-
 def check_out_dir(out: Path) -> Path:
     """An output directory that exists or can be created; nothing is created here."""
     if out.exists() and not out.is_dir():
@@ -235,7 +224,7 @@ def check_actor(actor: Any, fps: float, max_frames: int) -> np.ndarray:
         raise UMFError(
             f"the actor motion spans only {extent:.3f} m: not a body (all joints at one point?)"
         )
-    from umf.data.skeletons import choose_unit
+    from umf.units import choose_unit
 
     unit, name = choose_unit(actor)
     if name not in ("m", "stature"):  # a body of an adult's size in another unit
@@ -282,169 +271,3 @@ def chunk_size(num_people: int, frames: int, budget: int = CHUNK_PERSON_FRAMES) 
 def chunks(n: int, size: int) -> list[range]:
     """``range(n)`` cut into consecutive pieces of at most ``size``."""
     return [range(i, min(n, i + size)) for i in range(0, n, size)]
-
-
-# --------------------------------------------------------------------- model configs
-MAX_CONFIG_INT = 1 << 16  # any size or count in a model config (d_model, frames, steps ...)
-MAX_LAYERS = 256
-MAX_MODEL_BYTES = 8 << 30  # parameters and buffers of VAE + P-Flow + S-Flow
-CHOICES = {
-    "layout": ("1d", "2d"),
-    "solver": ("euler", "heun", "rk4"),
-    "encoder": ("minilm", "clip"),
-    "text_encoder": ("minilm", "clip", "clip-tokens"),
-    "family": ("paper", "small"),
-}
-_UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every", "seed"}
-_NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
-                 "guidance", "fine_guidance"}  # fmt: skip  # >= 0
-_POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
-_FRACTIONS = {"balance_labels", "caption_mix"}  # floats in [0, 1]
-
-
-def _check_value(where: str, kind: str, value: Any) -> None:
-    """One config field against its annotation: types, non-negative, finite, bounded."""
-    optional = "None" in kind
-    if value is None:
-        if not optional:
-            raise UMFError(f"{where} must not be null")
-        return
-    name = where.rsplit(".", 1)[-1]
-    if kind.startswith("tuple[str"):  # word lists: may be empty
-        if not isinstance(value, tuple | list):
-            raise UMFError(f"{where} must be a list, got {value!r}")
-        for v in value:
-            if not isinstance(v, str):
-                raise UMFError(f"{where} must be a list of words, got {v!r} in it")
-        if name == "respell":
-            from umf.text import respell_table
-
-            respell_table(value)
-        if name == "caption_mix_from":
-            from umf.train.datasets import metadata_pairs
-
-            metadata_pairs(value, where)
-        return
-    if kind.startswith("tuple"):
-        if not isinstance(value, tuple | list) or not value:
-            raise UMFError(f"{where} must be a non-empty list, got {value!r}")
-        inner = "float" if "float" in kind else "int"
-        for v in value:
-            _check_value(where, inner, v)
-        return
-    if kind.startswith("bool"):
-        if not isinstance(value, bool):
-            raise UMFError(f"{where} must be true or false, got {value!r}")
-    elif kind.startswith("int") and name in ("steps", "pair_steps"):
-        check_int(where, value, 1, MAX_FLOW_STEPS)
-    elif kind.startswith("int"):
-        hi = 2**63 - 1 if name in _UNBOUNDED else MAX_LAYERS if "layers" in name else MAX_CONFIG_INT
-        check_int(where, value, 0, hi)
-    elif kind.startswith("float"):
-        lo = 0.0 if name in _NON_NEGATIVE | _FRACTIONS | _POSITIVE else -1e9
-        check_float(where, value, lo, 1.0 if name in _FRACTIONS else 1e9)
-        if name in _POSITIVE and value <= 0:  # a weight of 0 leaves the path undetermined
-            raise UMFError(f"{where} must be greater than 0, got {value}")
-    elif kind.startswith("str"):
-        if not isinstance(value, str):
-            raise UMFError(f"{where} must be a string, got {value!r}")
-        if name in CHOICES and value not in CHOICES[name]:
-            raise UMFError(f"{where} must be one of {', '.join(CHOICES[name])}, got {value!r}")
-
-
-def check_config_values(config: Any, prefix: str = "") -> None:
-    """Every field of a (nested) config dataclass: right type, finite, in range."""
-    for f in dataclasses.fields(config):
-        value = getattr(config, f.name)
-        where = f"{prefix}{f.name}"
-        if dataclasses.is_dataclass(value):
-            check_config_values(value, where + ".")
-        else:
-            _check_value(where, str(f.type), value)
-    if not prefix:
-        check_float("fps", config.fps, 1.0, 1000.0)
-        if config.vae.max_frames < 15:
-            raise UMFError(f"vae.max_frames must be at least 15, got {config.vae.max_frames}")
-
-
-class _TextDim:
-    """Stands in for the text encoder where only its width matters (dry-run builds)."""
-
-    def __init__(self, dim: int) -> None:
-        self.dim = dim
-
-
-def dry_run_build(config: Any, text_dim: int = 384) -> dict[str, Any]:
-    """Build VAE, P-Flow and S-Flow on the ``meta`` device (no memory) and return them.
-
-    Catches configs that cannot be built (heads not dividing widths, token counts the
-    pyramid cannot halve ...) and ones too big to allocate, before anything is allocated.
-    """
-    import torch
-
-    from umf.pipeline import UMFPipeline
-    from umf.representation import Normalizer
-
-    try:
-        with torch.device("meta"):
-            norm = Normalizer(torch.zeros(262), torch.ones(262))
-            pipe = UMFPipeline.build(config, norm, _TextDim(text_dim))
-    except UMFError:
-        raise
-    except Exception as exc:  # construction raises many types for bad sizes
-        msg = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-        raise UMFError(f"the model config cannot be built: {msg}") from exc
-    modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
-    total = sum(
-        t.numel() * t.element_size()
-        for m in modules.values()
-        for t in [*m.parameters(), *m.buffers()]
-    )
-    if total > MAX_MODEL_BYTES:
-        raise UMFError(
-            f"the model config describes {total / 2**30:.1f} GiB of weights "
-            f"(at most {MAX_MODEL_BYTES / 2**30:.0f} GiB)"
-        )
-    return modules
-
-
-def check_model_config(config: Any, text_dim: int = 384) -> dict[str, Any]:
-    """Values first (types, ranges), then a dry-run build; returns the meta modules."""
-    check_config_values(config)
-    return dry_run_build(config, text_dim)
-
-
-def check_weight_shapes(path: Path, modules: dict[str, Any]) -> None:
-    """Each module file's tensor shapes against the (meta) modules, reading headers only."""
-    from safetensors import safe_open
-
-    for name, module in modules.items():
-        f = path / f"{name}.safetensors"
-        if not f.exists():
-            raise UMFError(f"{path}: missing module file {f.name}")
-        try:
-            with safe_open(str(f), framework="pt") as fh:
-                shapes = {k: tuple(fh.get_slice(k).get_shape()) for k in fh.keys()}
-        except Exception as exc:  # safetensors raises several types for a damaged header
-            raise UMFError(f"{f}: corrupt module file ({type(exc).__name__})") from exc
-        for key, t in module.state_dict().items():
-            if key in shapes and shapes[key] != tuple(t.shape):
-                raise UMFError(
-                    f"{path}: tensor {name}.{key} has shape {shapes[key]} in the checkpoint "
-                    f"but {tuple(t.shape)} in config.json"
-                )
-
-
-def check_model_weights(modules: dict[str, Any], normalizer: Any, path: Path) -> None:
-    """Loaded weights and normaliser must be finite, the normaliser's std positive."""
-    import torch
-
-    for name, module in modules.items():
-        for key, t in module.state_dict().items():
-            if t.is_floating_point() and not bool(torch.isfinite(t).all()):
-                raise UMFError(f"{path}: weights {name}.{key} contain NaN or infinite values")
-    mean, std = normalizer.mean, normalizer.std
-    if not bool(torch.isfinite(mean).all() & torch.isfinite(std).all()):
-        raise UMFError(f"{path}: the normaliser contains NaN or infinite values")
-    if not bool((std > 0).all()):
-        raise UMFError(f"{path}: the normaliser has a zero or negative std")

@@ -7,16 +7,16 @@ from pathlib import Path
 
 import typer
 
+from umf.cli.loading import load_pipeline, peek_config
 from umf.errors import UMFError
+from umf.exports import FORMATS, check_formats
 from umf.validation import (
-    FORMATS,
     MAX_SECONDS,
     MIN_SECONDS,
     check_actor,
     check_batch,
     check_float,
     check_for_model,
-    check_formats,
     check_int,
     check_out_dir,
     check_request,
@@ -48,33 +48,6 @@ def parse_steps(steps: str | None) -> list[int] | None:
         return [int(s) for s in steps.split(",")]
     except ValueError as exc:
         raise UMFError(f"--steps takes integers like 45,5, got {steps!r}") from exc
-
-
-def load_pipeline(model: Path | None):
-    """The bundled model, or the model directory the user named (one-line errors)."""
-    from umf.pipeline import UMFPipeline, default_model_dir
-
-    if model is None and not default_model_dir().exists():
-        raise UMFError("no bundled model in this install; pass --model DIR (see umf train)")
-    return UMFPipeline.from_pretrained(model)
-
-
-def peek_config(model: Path | None):
-    """The model's config.json for model-specific checks before loading, or None when it
-    cannot be read (loading then reports why)."""
-    import json
-
-    from umf.config import UMFConfig
-    from umf.pipeline import default_model_dir
-    from umf.validation import check_config_values
-
-    path = (model if model is not None else default_model_dir()) / "config.json"
-    try:
-        config = UMFConfig.from_dict(json.loads(path.read_text()))
-        check_config_values(config)
-    except (OSError, ValueError, UMFError):
-        return None
-    return config
 
 
 def warn_unknown(pipe, prompts: list[str]) -> None:

@@ -6,7 +6,6 @@ import sys
 
 import typer
 
-from umf import __version__
 from umf.cli.data import app as data_app
 from umf.cli.eval import evaluate
 from umf.cli.generate import generate, react
@@ -14,6 +13,7 @@ from umf.cli.info import info
 from umf.cli.serve import serve, view
 from umf.cli.train import app as train_app
 from umf.errors import UMFError
+from umf.version import __version__
 
 try:  # typer >= 0.20 parses with its own copy of click
     from typer._click import exceptions as click_errors

@@ -36,7 +36,7 @@ def _app(loader: Callable[[], Any] | None, pipeline: Any = None, verbose: bool =
 
 def _loader(model: Path | None) -> Callable[[], Any]:
     def load() -> Any:
-        from umf.cli.generate import load_pipeline
+        from umf.cli.loading import load_pipeline
 
         return load_pipeline(model)
 

@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 import torch
 
-from umf.data.bvh import forward_kinematics, parse_bvh
+from umf.bvh import forward_kinematics, parse_bvh
 from umf.data.clip import FPS, MotionClip
 from umf.errors import UMFError
 

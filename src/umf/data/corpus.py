@@ -32,7 +32,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from umf import __version__
 from umf.data.clip import FPS, MotionClip
 from umf.data.humanml3d import SkippedItemWarning
 from umf.data.scenes import Actor, build_scene, build_scene_features, compose_corpus
@@ -45,6 +44,7 @@ from umf.representation import (
     joints_to_rot6d,
 )
 from umf.rotations import matrix_to_6d
+from umf.version import __version__
 
 FORMAT = "umf-corpus"
 FORMAT_VERSION = 1

@@ -34,8 +34,9 @@ from pathlib import Path
 import numpy as np
 
 from umf.data.clip import FPS, MotionClip
-from umf.data.skeletons import SkeletonMap, choose_unit, read_skeleton_json, recognise
+from umf.data.skeletons import SkeletonMap, read_skeleton_json, recognise
 from umf.errors import UMFError
+from umf.units import choose_unit
 
 MOTION_SUFFIXES = (".bvh", ".txt", ".json")
 META_FILES = {"captions.csv", "takes.csv", "skeleton.json"}
@@ -107,8 +108,8 @@ def read_motion(path: Path, skeleton: SkeletonMap | None = None) -> RawMotion:
 def check_bones(joints: np.ndarray, label: str) -> None:
     """A mapping that puts two connected SMPL joints at one point (a bone of no length) gives
     a body no rigid skeleton or rotation can describe: one line naming the two joints."""
-    from umf.data.skeletons import body_span
     from umf.skeleton import JOINT_NAMES, PARENTS
+    from umf.units import body_span
 
     span = body_span(joints)
     for k, p in enumerate(PARENTS):
@@ -121,7 +122,7 @@ def check_bones(joints: np.ndarray, label: str) -> None:
 
 
 def _read_bvh(text: str, path: Path, skeleton: SkeletonMap | None) -> RawMotion:
-    from umf.data.bvh import forward_kinematics, parse_bvh
+    from umf.bvh import forward_kinematics, parse_bvh
 
     bvh = parse_bvh(text, str(path))
     if not bvh.frame_time > 0:

@@ -4,7 +4,7 @@ What ``umf react --actor`` and ``umf data show`` accept. BVH files may be on our
 hierarchy (what ``umf generate --format bvh`` writes) or any skeleton the mocap importer
 reads (:mod:`umf.data.skeletons`: Bandai, CMU, Mixamo, SMPL names, or a ``skeleton.json``
 beside the file), at any frame rate and in any unit: the one that makes the body an
-adult's size (:func:`umf.data.skeletons.choose_unit`), and the motion is resampled to 30 fps. The
+adult's size (:func:`umf.units.choose_unit`), and the motion is resampled to 30 fps. The
 result is the same container as a generated scene (fitted to one rigid body per person,
 which leaves a rigid skeleton's joints as they are), so it can be written in any format.
 """
@@ -16,9 +16,9 @@ from pathlib import Path
 
 import numpy as np
 
-from umf.data.skeletons import choose_unit
 from umf.errors import UMFError
 from umf.scene import Scene
+from umf.units import choose_unit
 
 FPS = 30.0
 MAX_NPZ_JOINTS_BYTES = 256 * 10**6  # 16 people x 10 min at 30 fps is 76 MB

@@ -37,14 +37,9 @@ import numpy as np
 
 from umf.errors import UMFError
 from umf.skeleton import JOINT_NAMES
+from umf.units import UNITS
 
 Source = str | tuple[str, str]  # a joint, "end:<joint>", or the midpoint of two joints
-
-# metres per file unit; "cmu" is the CMU ASF unit (0.45 inch^-1 ... i.e. 1/0.45 inches)
-UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu": 0.0254 / 0.45}
-# Span of a standing adult's joints (toe/ankle to head joint), metres: what a unit must give.
-STATURE_SPAN = (1.25, 2.1)
-NOMINAL_SPAN = 1.5  # where a body is scaled to when no unit gives a plausible span
 
 
 def normal_name(name: str) -> str:
@@ -203,27 +198,3 @@ def _unit(value: object, path: Path) -> float | None:
     if isinstance(value, int | float) and not isinstance(value, bool) and 0 < value < 1e3:
         return float(value)
     raise UMFError(f"{path}: 'unit' must be metres per unit or one of {', '.join(UNITS)}")
-
-
-def body_span(joints: np.ndarray) -> float:
-    """Height of the joint chain toe/ankle -> head along the bones, in file units: the
-    median over frames of leg + spine + neck lengths, so it does not depend on the pose."""
-    j = np.asarray(joints, np.float64).reshape(-1, 22, 3)
-    chain = (7, 4, 1, 0, 3, 6, 9, 12, 15)  # left ankle up the leg, then the spine to the head
-    span = np.median(np.linalg.norm(np.diff(j[:, chain], axis=1), axis=-1).sum(-1))
-    if not np.isfinite(span) or span <= 0:
-        raise UMFError("the motion has no extent (all joints at one point): not a body")
-    return float(span)
-
-
-def choose_unit(joints: np.ndarray) -> tuple[float, str]:
-    """Metres per file unit and how it was chosen: the named unit that gives an adult's
-    joint span (:data:`STATURE_SPAN`, nearest :data:`NOMINAL_SPAN` in log scale), else a
-    stature scale that gives exactly the nominal span."""
-    span = body_span(joints)
-    fits = [(abs(np.log(span * u / NOMINAL_SPAN)), name, u) for name, u in UNITS.items()
-            if STATURE_SPAN[0] <= span * u <= STATURE_SPAN[1]]  # fmt: skip
-    if fits:
-        _, name, u = min(fits)
-        return u, name
-    return NOMINAL_SPAN / span, "stature"

@@ -31,8 +31,7 @@ from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.eval import metrics as M
 from umf.eval.evaluator import MotionTextEvaluator
-from umf.representation import FEATURE_DIM
-from umf.train.datasets import canonicalize_features
+from umf.representation import FEATURE_DIM, canonicalize_features
 
 Array = np.ndarray
 Generate = Callable[[list[str], list[int], int], Sequence[Array]]

@@ -30,7 +30,6 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
-from umf import __version__
 from umf.data.clip import FPS
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
@@ -43,6 +42,7 @@ from umf.eval.relations import real_scene_joints, relation_accuracy
 from umf.io import atomic_path, write_json_atomic, write_text_atomic
 from umf.pipeline import Scene, UMFPipeline, delivered_joints
 from umf.representation import CONTACT
+from umf.version import __version__
 
 Log = Callable[[str], None]
 MIN_FRAMES = 15  # the pipeline's shortest scene
@@ -185,9 +185,7 @@ def model_label(path: Path) -> str:
 
 def default_evaluator_dir() -> Path:
     """Where a bundled evaluator (``interaction/``, ``single/``) lives in the package."""
-    import umf
-
-    return Path(umf.__file__).parent / "assets" / "evaluator"
+    return Path(__file__).resolve().parents[1] / "assets" / "evaluator"
 
 
 # --------------------------------------------------------------------- generation
@@ -234,7 +232,7 @@ def batch_seed(seed: int, index: int) -> int:
 def _features(scene: Scene) -> np.ndarray:
     """Features in person 1's canonical frame, as the real items are scored: the decoded
     person 1 starts 0.1-0.2 m off the origin, which an evaluator would otherwise see."""
-    from umf.train.datasets import canonicalize_features
+    from umf.representation import canonicalize_features
 
     return canonicalize_features(torch.from_numpy(scene.features)).numpy()
 

@@ -18,6 +18,8 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from umf.errors import UMFError
+
 __all__ = ["FORMATS", "Format", "stem_of", "targets", "write_formats"]
 
 
@@ -84,3 +86,13 @@ def __getattr__(name: str) -> Any:  # ``from umf.exports import write_glb`` (old
 
         return getattr(gltf, name)
     raise AttributeError(name)
+
+
+def check_formats(formats: str) -> list[str]:
+    """Names in ``"npz,bvh"`` form, checked against :data:`FORMATS`, each once, in order."""
+    wanted = [f.strip().lower() for f in formats.split(",") if f.strip()]
+    bad = [f for f in wanted if f not in FORMATS]
+    if bad or not wanted:
+        raise UMFError(f"unknown format {','.join(bad) or formats!r}; choose from "
+                       f"{tuple(FORMATS)}")  # fmt: skip
+    return list(dict.fromkeys(wanted))

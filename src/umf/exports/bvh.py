@@ -11,7 +11,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from umf.data.bvh import write_smpl22_bvh
+from umf.bvh import write_smpl22_bvh
 
 __all__ = ["person_path", "write"]
 

@@ -31,13 +31,13 @@ import numpy as np
 import pygltflib as gl
 import torch
 
-from umf import __version__
 from umf.errors import UMFError
 from umf.io import atomic_path
 from umf.kinematics import Bodies, fit_bodies
 from umf.render import PALETTE
 from umf.rotations import matrix_to_quat
 from umf.skeleton import JOINT_NAMES, NUM_JOINTS, PARENTS, REST_DIRECTIONS
+from umf.version import __version__
 
 __all__ = [
     "ANIMATION_NAME",

@@ -3,7 +3,7 @@ evaluators (T2M, and the metrics built on it) read.
 
 One ``.npz`` per person:
 
-- ``new_joint_vecs`` (T - 1, 263): the vectors, :func:`umf.data.humanml3d.encode_joints`
+- ``new_joint_vecs`` (T - 1, 263): the vectors, :func:`umf.humanml3d.encode_joints`
   (layout and conventions there), heading smoothed as HumanML3D's processing does;
 - ``new_joints`` (T, 22, 3): the joints in HumanML3D's canonical frame (first frame's root
   above the origin facing +Z, the floor at y = 0); ``recover_joints(new_joint_vecs)`` gives
@@ -24,12 +24,7 @@ from typing import Any
 import numpy as np
 import torch
 
-from umf.data.humanml3d import (
-    HUMANML3D_FPS,
-    canonicalize_first_frame,
-    encode_joints,
-    resample,
-)
+from umf.humanml3d import HUMANML3D_FPS, canonicalize_first_frame, encode_joints, resample
 from umf.io import save_npz_atomic
 
 __all__ = ["HEADING_SIGMA", "person_arrays", "write"]

@@ -17,8 +17,8 @@ from typing import Any
 
 import numpy as np
 
-from umf import __version__
 from umf.io import save_npz_atomic
+from umf.version import __version__
 
 __all__ = ["scene_arrays", "write"]
 

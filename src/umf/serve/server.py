@@ -34,10 +34,10 @@ from urllib.parse import parse_qs, unquote, urlsplit
 
 import numpy as np
 
-from umf import __version__
 from umf.errors import UMFError
 from umf.serve.scenes import BUSY_WAIT_S, ActorStore, ModelHolder, SceneRecord, SceneStore
 from umf.serve.validate import GenerateRequest, RequestError, parse_generate
+from umf.version import __version__
 
 THREE_VERSION = "0.187.0"
 STATIC = Path(__file__).parent / "static"

@@ -39,22 +39,21 @@ import numpy as np
 import torch
 from torch.utils.data import DataLoader, Dataset, Sampler
 
+from umf.config import metadata_pairs
 from umf.data.clip import FPS, MotionClip
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.representation import (
     FEATURE_DIM,
-    POS,
-    VEL,
     Normalizer,
     RigidTransform,
     assemble_features,
     canonical_transform,
-    features_to_joints,
+    canonicalize_features,
     heading_angle,
     mirror_features,
+    place_features,
 )
-from umf.rotations import yaw_matrix
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import swap_words, word_pattern
 
@@ -89,40 +88,6 @@ _SPELL_RE = word_pattern(_SPELLINGS)
 
 
 # --------------------------------------------------------------------- pure functions
-def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) -> Tensor:
-    """Turn people about +Y by ``yaw`` (rad) around the origin, then move them by (dx, dz).
-
-    Only positions and velocities change: local rotations exclude the root and contacts
-    depend on heights and speeds, both invariant to a rigid motion on the floor. Same
-    convention as :func:`umf.data.scenes.yaw_rotate` (+Z turns to (sin, 0, cos)).
-    Works on (..., T, 262) and matches features recomputed from the moved joints.
-    """
-    lead = features.shape[:-1]
-    rot = yaw_matrix(torch.as_tensor(yaw, dtype=features.dtype)).to(features.device)
-    shift = torch.tensor([dx, 0.0, dz], dtype=features.dtype, device=features.device)
-    pos = features[..., POS].reshape(*lead, 22, 3) @ rot.T + shift
-    vel = features[..., VEL].reshape(*lead, 22, 3) @ rot.T
-    return torch.cat(
-        [pos.reshape(*lead, 66), vel.reshape(*lead, 66), features[..., VEL.stop :]], dim=-1
-    )
-
-
-def canonicalize_features(features: Tensor) -> Tensor:
-    """Express people (P, T, 262) (or one person (T, 262)) in person 1's frame at frame 0.
-
-    Person 1's first-frame pelvis goes over the origin (XZ only; heights are kept) and
-    person 1's first-frame facing direction turns to +Z; everyone moves with them, so
-    relative placements are unchanged.
-    """
-    first = features if features.ndim == 2 else features[0]
-    joints0 = features_to_joints(first[0])
-    yaw = -heading_angle(joints0)
-    rot = yaw_matrix(yaw)
-    origin = torch.stack([joints0[0, 0], joints0.new_zeros(()), joints0[0, 2]])
-    shift = -(rot @ origin)
-    return place_features(features, yaw, float(shift[0]), float(shift[2]))
-
-
 def mirror_caption(text: str) -> str:
     """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
     return swap_words(text, _SIDE_WORDS, _SIDE_RE)
@@ -261,15 +226,6 @@ def item_rng(seed: int, epoch: int, index: int, stream: int = 0) -> np.random.Ge
     """The generator of one item: a function of (seed, epoch, index) only; ``stream`` > 0
     gives the item an independent extra generator (draws that must not shift the others)."""
     return np.random.default_rng([seed % 2**63, epoch, index, *([stream] if stream else [])])
-
-
-def metadata_pairs(values: Sequence[str], where: str = "caption_mix_from") -> list[list[str]]:
-    """``["style=normal", ...]`` as [key, value] pairs; a one-line error for anything else
-    (the config check and the dataset both read the option through this)."""
-    pairs = [v.split("=", 1) for v in values]
-    if any(len(pair) != 2 or not pair[0] for pair in pairs):
-        raise UMFError(f"{where} takes key=value pairs (e.g. style=normal), got {list(values)}")
-    return pairs
 
 
 def _check_frames(min_frames: int, max_frames: int) -> None:

@@ -74,8 +74,8 @@ def resolve_config(
 def check_run_config(cfg: UMFConfig) -> None:
     """Types and ranges of every option and a dry-run build of the model (meta device, no
     memory), so a bad ``--set`` fails before anything is written to the run directory."""
+    from umf.pipeline import check_model_config
     from umf.train.loop import check_train_config
-    from umf.validation import check_model_config
 
     check_model_config(cfg)
     for stage in (*STAGES, "evaluator"):

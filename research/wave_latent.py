@@ -1,17 +1,17 @@
 """Where a generated wave loses its swing: the VAE's latent, its decoder, or the P-Flow?
 
-    python scripts/wave_latent.py latents MODEL_DIR [--corpus out/corpus]
-    python scripts/wave_latent.py decode MODEL_DIR [MODEL_DIR ...] [--corpus out/corpus]
-    python scripts/wave_latent.py refine MODEL_DIR [--corpus out/corpus]
-    python scripts/wave_latent.py finetune MODEL_DIR --out DIR [--steps 400] [--label ...]
-    python scripts/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
-    python scripts/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
-    python scripts/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
+    python research/wave_latent.py latents MODEL_DIR [--corpus out/corpus]
+    python research/wave_latent.py decode MODEL_DIR [MODEL_DIR ...] [--corpus out/corpus]
+    python research/wave_latent.py refine MODEL_DIR [--corpus out/corpus]
+    python research/wave_latent.py finetune MODEL_DIR --out DIR [--steps 400] [--label ...]
+    python research/wave_latent.py detail MODEL_DIR [--corpus out/corpus]
+    python research/wave_latent.py perturb MODEL_DIR [--corpus out/corpus]
+    python research/wave_latent.py overfit MODEL_DIR [--clips 16] [--steps 600] [--crops K]
         [--split train] [--cosine] [--captions own|shuffled] [--caption-mix Q] [--mirror]
         [--guidance G]
         [--fresh WIDTH,LAYERS] [--detail-norm] [--seed S] [--corpus ...]
-    python scripts/wave_latent.py churn MODEL_DIR
-    python scripts/wave_latent.py nyquist MODEL_DIR
+    python research/wave_latent.py churn MODEL_DIR
+    python research/wave_latent.py nyquist MODEL_DIR
 
 ``latents``: for waves, walks and raised hands, how much the latent changes along time,
 for latents of real training clips (posterior means of their first 4 s) and for latents
@@ -687,7 +687,7 @@ def finetune(args: argparse.Namespace) -> None:
     from umf.models.vae import vae_losses
     from umf.train.datasets import SingleMotionDataset
 
-    # the VAE alone, as scripts/vae_recipe.py loads it (a script, not a package module)
+    # the VAE alone, as research/vae_recipe.py loads it (a script, not a package module)
     spec = importlib.util.spec_from_file_location("vae_recipe", Path(__file__).with_name(
         "vae_recipe.py"))  # fmt: skip
     recipe = importlib.util.module_from_spec(spec)

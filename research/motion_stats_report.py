@@ -9,7 +9,7 @@ the label's real clips (at most 64 per label, evenly spaced over the corpus, so 
 training clips; whole, up to 300 frames) encoded and decoded by the model's VAE: what its
 latents can give at best, raw or, with ``--delivered``, as the pipeline delivers them.
 
-    python scripts/motion_stats_report.py MODEL_DIR [MODEL_DIR ...] [--delivered]
+    python research/motion_stats_report.py MODEL_DIR [MODEL_DIR ...] [--delivered]
         [--reconstructed] [--corpus out/corpus]
 """
 

@@ -1,6 +1,6 @@
 """Calibrate the coverage threshold: paraphrases of trained actions against unseen actions.
 
-    python scripts/calibrate_coverage.py --corpus out/corpus [--model DIR] [--out results/coverage]
+    python research/calibrate_coverage.py --corpus out/corpus [--model DIR] [--out results/coverage]
 
 Builds the vocabulary of the corpus's training captions in the model's text encoder, scores
 ``results/coverage/paraphrases.txt`` (should be known) and ``unseen.txt`` (should not), picks

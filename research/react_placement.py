@@ -8,7 +8,7 @@ generated distance is within 50 cm of the real one, the median error of the dist
 the first frame alone (where person 2 starts), and person 2's pelvis speed. With
 person 1 fixed to real motion, a wrong distance is the S-Flow's alone, not the P-Flow's.
 
-    python scripts/react_placement.py MODEL_DIR [MODEL_DIR ...] [--split val] [--scenes 64]
+    python research/react_placement.py MODEL_DIR [MODEL_DIR ...] [--split val] [--scenes 64]
         [--sflow-steps S]
 """
 

@@ -1,12 +1,12 @@
 """Motion statistics of generated single people for prompts of your choice.
 
 How much does the wording of a prompt matter? Each prompt gives ``--samples`` people (4 s,
-seed 0, raw decoded motion: the same draws as ``scripts/motion_stats_report.py``), and one
+seed 0, raw decoded motion: the same draws as ``research/motion_stats_report.py``), and one
 row of medians of ``umf.eval.motion_stats.motion_statistics`` (speeds m/s, heights m).
 With ``--label`` a first row gives the corpus's real single-person clips of that content
 label (any label of the corpus, e.g. walk-back; all splits pooled, at most 300 frames each).
 
-    python scripts/prompt_stats.py MODEL_DIR "A person walks backward." \\
+    python research/prompt_stats.py MODEL_DIR "A person walks backward." \\
         "Somebody walks backwards." --label walk-back [--corpus out/corpus]
 """
 

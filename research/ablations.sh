@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # The paper's ablations (Tables 3-5) on a trained model, at the `small` family's CPU budget.
 #
-#   scripts/ablations.sh MODEL CORPUS [OUT]
+#   research/ablations.sh MODEL CORPUS [OUT]
 #
 # MODEL is the model under study (the bundled one: src/umf/assets/model), CORPUS its corpus,
 # OUT the reports (results/ablations). Every row, the baseline included, retrains what it
@@ -16,8 +16,8 @@
 # about 1 h of training and 40 min of evaluation here.
 # Resumable: finished stages and written reports are skipped, killed stages resume.
 set -euo pipefail
-MODEL=${1:?usage: scripts/ablations.sh MODEL CORPUS [OUT]}
-CORPUS=${2:?usage: scripts/ablations.sh MODEL CORPUS [OUT]}
+MODEL=${1:?usage: research/ablations.sh MODEL CORPUS [OUT]}
+CORPUS=${2:?usage: research/ablations.sh MODEL CORPUS [OUT]}
 OUT=${3:-results/ablations}
 WORK=${ABLATION_RUNS:-runs/ablations}
 TABLES=${TABLES:-4 5}
@@ -141,4 +141,4 @@ if has 5; then
   reports+=($!)
 fi
 for r in "${reports[@]}"; do wait "$r"; done
-"$PY" scripts/ablation_tables.py "$OUT" --time
+"$PY" research/ablation_tables.py "$OUT" --time

@@ -1,13 +1,13 @@
 """The paper's Tables 3-5 on our corpus, from the `umf eval` reports of the ablations.
 
-Reads ``OUT/{latent,pyramid,sflow}/metrics.json`` (written by ``scripts/ablations.sh``),
+Reads ``OUT/{latent,pyramid,sflow}/metrics.json`` (written by ``research/ablations.sh``),
 each variant's training time and VAE reconstruction from its run directory
 (``RUN/model`` -> ``RUN/<stage>/metrics.csv``), optionally re-times every model on an
 otherwise idle machine (``--time``: the reports' own timings are taken while other jobs
 share the CPU), and writes ``OUT/README.md`` (ending with ``OUT/notes.md``, the
 hand-written reading, if present) and ``OUT/ablations.png``.
 
-    python scripts/ablation_tables.py results/ablations [--time] [--run NAME=RUN_DIR]
+    python research/ablation_tables.py results/ablations [--time] [--run NAME=RUN_DIR]
 """
 
 from __future__ import annotations
@@ -211,7 +211,7 @@ def main() -> None:
         + " on the Bandai corpus",
         "",
         "Each table's rows, its first included, retrain only what they vary, all at one budget "
-        "(`scripts/ablations.sh`), so rows compare with each other. "
+        "(`research/ablations.sh`), so rows compare with each other. "
         "Every number comes from fully generated scenes scored by `umf eval` (two people: the "
         "InterGen protocol with our evaluator, groups of 96; single: P-Flow alone). Mean ± 95% "
         "interval over the replications of each report. Relations: fraction of test scenes "

@@ -6,7 +6,7 @@ served as it is (``umf.train.datasets.extension_period``, the dataset's own choi
 one row per content label, then the seam and turn of the repeated cycles
 (``umf.train.datasets.last_cycle``) and the median length of each label's short clips.
 
-    python scripts/short_clips.py [--corpus out/corpus] [--split train] [--min-frames 140]
+    python research/short_clips.py [--corpus out/corpus] [--split train] [--min-frames 140]
 """
 
 from __future__ import annotations

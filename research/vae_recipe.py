@@ -1,7 +1,8 @@
 """Score motion VAEs on reconstructions of real test clips (the VAE recipe table).
 
-    python scripts/vae_recipe.py score NAME=VAE_DIR ... --corpus out/corpus --out results/vae-recipe
-    python scripts/vae_recipe.py memorise --corpus out/corpus --set vae.w_pos=0.5 ...
+    python research/vae_recipe.py score NAME=VAE_DIR ... --corpus out/corpus \
+        --out results/vae-recipe
+    python research/vae_recipe.py memorise --corpus out/corpus --set vae.w_pos=0.5 ...
 
 ``memorise`` trains a fresh small VAE (``--set`` overrides) on one fixed batch of 32
 randomly placed training crops (one thread) and prints R^2 per body-frame group every 50

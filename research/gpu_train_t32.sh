@@ -2,15 +2,15 @@
 # The 32-token model on one lent GPU, in two calls of the device tool (what one call may
 # carry is capped: the motion pack and the text features travel apart), on the same warm
 # machine:
-#   call 1 (carry .gpu/pack):  scripts/gpu_train_t32.sh vae   BUDGET_S   # unpack motion, train the VAE
-#   call 2 (carry .gpu/text):  scripts/gpu_train_t32.sh flows BUDGET_S   # unpack text, train both flows
+#   call 1 (carry .gpu/pack):  research/gpu_train_t32.sh vae   BUDGET_S   # unpack motion, train the VAE
+#   call 2 (carry .gpu/text):  research/gpu_train_t32.sh flows BUDGET_S   # unpack text, train both flows
 # Both calls pass the same options, so the flows load the VAE they were planned with.
 # With a VAE already trained (a model directory holding vae.safetensors, config.json and
 # normalizer.safetensors), call 1 is `motion` (unpack only) and call 2 carries that directory
-# too and names it: VAE_MODEL=.gpu/t32-vae scripts/gpu_train_t32.sh flows BUDGET_S.
+# too and names it: VAE_MODEL=.gpu/t32-vae research/gpu_train_t32.sh flows BUDGET_S.
 # The VAE's options then come from that directory's config.json (the vae.* options below are
 # not applied), so the same call retrains the flows of any model, e.g. the bundled 16-token
-# one: VAE_MODEL=src/umf/assets/model FLOW_STEPS=7000 scripts/gpu_train_t32.sh flows 565
+# one: VAE_MODEL=src/umf/assets/model FLOW_STEPS=7000 research/gpu_train_t32.sh flows 565
 # (results/flows-long-h200-20261126: 8,600 planned, 7,000-7,750 reached in 575 s on an H200).
 # A model trained with `vae` samples pairs at the S-Flow's 10 steps (the small family's): choose
 # sflow.pair_steps on the val split afterwards (umf eval --split val --variant
@@ -22,8 +22,8 @@
 # When the working tree plus a pack exceed one call's carry (64 MiB; the tree alone is 43 MB,
 # the coarse motion pack 26 MB), split the packs into parts and stash all but the last on the
 # warm machine: `python scripts/corpus_pack.py split .gpu/all .gpu 2`, then
-#   call 1 (carry .gpu/part1):  scripts/gpu_train_t32.sh stash
-#   call 2 (carry .gpu/part2):  scripts/gpu_train_t32.sh flows BUDGET_S   # (or vae / motion)
+#   call 1 (carry .gpu/part1):  research/gpu_train_t32.sh stash
+#   call 2 (carry .gpu/part2):  research/gpu_train_t32.sh flows BUDGET_S   # (or vae / motion)
 # A phase that carries a part joins it with the stashed ones (SHA-256 checked) and unpacks
 # them instead of .gpu/pack or .gpu/text (results/umf-small-bandai-h200-20261127).
 set -euo pipefail

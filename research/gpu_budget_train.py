@@ -3,8 +3,8 @@
 Used on a lent GPU machine with a hard device-time limit, over a corpus unpacked by
 ``scripts/corpus_pack.py`` (``out/corpus``, text features included):
 
-    python scripts/gpu_budget_train.py smoke        # time a VAE step (and the paper VAE's)
-    python scripts/gpu_budget_train.py full 520     # flows timed, then VAE/P-Flow/S-Flow
+    python research/gpu_budget_train.py smoke        # time a VAE step (and the paper VAE's)
+    python research/gpu_budget_train.py full 520     # flows timed, then VAE/P-Flow/S-Flow
                                                     # sized to fill 520 s, exported to $OUT
 
 ``full`` gives the VAE 45 % of what is left after timing, P-Flow 60 % of the rest, S-Flow

@@ -3,13 +3,13 @@
 A wave is a side-to-side swing of the raised hand (about once a second); five still frames
 cannot show it, and a hand held up still looks like a wave in them. This plots, for real
 clips of a label and for people generated from its prompt by each model (4 s, seed 0 or
-``--seed``, raw decoded motion: the draws of ``scripts/motion_stats_report.py``), the right wrist's
+``--seed``, raw decoded motion: the draws of ``research/motion_stats_report.py``), the right wrist's
 sideways offset from the pelvis in the person's own frame (heading at frame 0) over time,
 one panel per source, and prints each source's medians of the root-relative right-wrist
 speed and of the swings per second (turns after at least 10 cm; ``umf.eval.motion_stats``,
 the statistics the label check uses), and how many people swing at least once a second.
 
-    python scripts/wrist_trace.py NAME=MODEL_DIR [NAME=MODEL_DIR ...] --out FILE.png
+    python research/wrist_trace.py NAME=MODEL_DIR [NAME=MODEL_DIR ...] --out FILE.png
         [--corpus out/corpus] [--label wave-right-hand] [--people 6] [--seed 0]
 """
 

@@ -8,7 +8,7 @@ scenes of ``umf.eval.motion_stats`` statistics (pelvis travel speed, root-relati
 wrist speed, head drop) and the mean joint acceleration. A person carried along a path in
 a still pose has a real pelvis speed and almost no ankle or wrist speed.
 
-    python scripts/pair_motion_stats.py [MODEL_DIR] [--split val] [--scenes 64]
+    python research/pair_motion_stats.py [MODEL_DIR] [--split val] [--scenes 64]
 """
 
 from __future__ import annotations

@@ -1,6 +1,6 @@
 """What a model learnt from the real mocap: salsa couples, new actions, against real takes.
 
-    python scripts/teach_report.py [--model DIR] [--corpus out/corpus] [--seeds 8] [--out FILE]
+    python research/teach_report.py [--model DIR] [--corpus out/corpus] [--seeds 8] [--out FILE]
 
 Measured on delivered scenes (``scene.joints``, after the clean-up) and on the decoder's raw
 positions, seeds 0..N-1, 4 s each (the targets of the "teach it" issue):
@@ -109,21 +109,22 @@ def main() -> None:
         report["actions"][kind] = {"prompt": prompt, "seeds": rows,
                                    "passed": sum(r["pass"] for r in rows),
                                    "raw_passed": sum(r["raw_pass"] for r in rows)}  # fmt: skip
+
     def med(rows, k):
         return float(np.median([r[k] for r in rows]))
 
     print(f"model {pipe.name}; {args.seeds} seeds, 4 s")
     print("salsa (medians)  hands_near  pelvis/stature  facing  min joint (m)  overlap (cm, "
-          "frames > 1 cm)  passed")
+          "frames > 1 cm)  passed")  # fmt: skip
     for view, rows in report["salsa"].items():
         print(f"  {view:14s} {med(rows, 'hands_near'):10.2f} {med(rows, 'pelvis'):15.2f} "
               f"{med(rows, 'facing'):7.2f} {med(rows, 'min_joint_m'):14.3f}  "
               f"{med(rows, 'penetration_cm'):6.2f}, {med(rows, 'penetration_frac'):.2f}"
-              f"{'':14s}{sum(r['pass'] for r in rows)}/{len(rows)}")
+              f"{'':14s}{sum(r['pass'] for r in rows)}/{len(rows)}")  # fmt: skip
     for kind, r in report["actions"].items():
         vals = ", ".join(f"{x['value']:.2f}" for x in r["seeds"])
         print(f"{kind:10s} delivered {r['passed']}/{args.seeds}, raw {r['raw_passed']}/{args.seeds}"
-              f"  ({vals})")
+              f"  ({vals})")  # fmt: skip
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(report, indent=1) + "\n")

@@ -1,6 +1,6 @@
 """How well the mocap importer maps each library's skeleton onto SMPL-22, and how fast.
 
-    python scripts/mocap_report.py DIR [DIR ...] [--out FILE]
+    python research/mocap_report.py DIR [DIR ...] [--out FILE]
 
 For each ``--mocap``-style folder: clips read per second (files parsed, forward kinematics,
 mapping, resampling), and per skeleton the mapping's fidelity against the source's own
@@ -35,7 +35,7 @@ def bone_cv(j: np.ndarray) -> float:
 
 def direct_error(path: Path, skeleton) -> float:
     """Largest distance (file units -> m) between mapped joints and the source FK joints."""
-    from umf.data.bvh import forward_kinematics, read_bvh
+    from umf.bvh import forward_kinematics, read_bvh
     from umf.data.mocap import read_motion
     from umf.data.skeletons import normal_name, recognise
 
@@ -94,10 +94,10 @@ def main() -> None:
         }  # fmt: skip
         r = report[d.name]
         print(f"{d.name}: {r['clips']} clips ({r['files']} files) in {r['seconds']} s = "
-              f"{r['files_per_s']} files/s; skipped {r['skipped']}")
+              f"{r['files_per_s']} files/s; skipped {r['skipped']}")  # fmt: skip
         for k, v in r["skeletons"].items():
             print(f"  {k:12s} direct {v['direct_mm']:.4f} mm, bone length variation "
-                  f"{v['bone_cv_pct']:.3f} %, rigid fit {v['fit_mm']:.2f} mm")
+                  f"{v['bone_cv_pct']:.3f} %, rigid fit {v['fit_mm']:.2f} mm")  # fmt: skip
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(report, indent=1) + "\n")

@@ -1,14 +1,14 @@
 """How generated people move second by second: does the motion hold up past a label's usual length?
 
 Each prompt gives ``--samples`` people (``--seconds`` long, seed 0, raw decoded motion: the
-draws of ``scripts/motion_stats_report.py``). Per model and prompt, one row of medians over
+draws of ``research/motion_stats_report.py``). Per model and prompt, one row of medians over
 the people of each second's mean pelvis floor speed and mean root-relative ankle speed
 (m/s). A standing gesture should stay near the real clips' pelvis speed (hand-raisers:
 0.03) in every second, a run should keep running; with ``--corpus`` a last column gives
 the median length of the real clips of the prompt's label (``umf.eval.motion_stats.LABELS``).
 Cells read "pelvis / ankles".
 
-    python scripts/speed_over_time.py MODEL_DIR [MODEL_DIR ...]
+    python research/speed_over_time.py MODEL_DIR [MODEL_DIR ...]
         [--prompt "A person raises both hands." ...] [--seconds 4] [--corpus out/corpus]
 """
 

@@ -19,7 +19,7 @@ The full generation's FID (P-Flow and S-Flow) is the report's (``umf eval``). A 
 ``react`` and ``vae`` is the S-Flow's; between the report and ``react``, the P-Flow's
 person 1.
 
-    python scripts/pair_fid_floor.py [NAME=]MODEL_DIR ... [--split val] [--replications 5]
+    python research/pair_fid_floor.py [NAME=]MODEL_DIR ... [--split val] [--replications 5]
 """
 
 from __future__ import annotations
@@ -36,8 +36,12 @@ from umf.eval.protocol import aligned_scores, corpus_items
 from umf.eval.reconstruction import reconstruct
 from umf.eval.report import default_evaluator_dir, load_evaluators
 from umf.pipeline import UMFPipeline
-from umf.representation import features_to_joints, heading_angle
-from umf.train.datasets import canonicalize_features, place_features
+from umf.representation import (
+    canonicalize_features,
+    features_to_joints,
+    heading_angle,
+    place_features,
+)
 
 
 def start_as(person: np.ndarray, ref: np.ndarray) -> np.ndarray:

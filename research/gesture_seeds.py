@@ -5,7 +5,7 @@ For raised hands (lower wrist above the head), a bow (head drop), a right-hand w
 speed: how much the seeds differ), the value of each seed and the median, on the fitted
 joints a user's files hold (``scene.joints``).
 
-    python scripts/gesture_seeds.py [MODEL_DIR ...]      # default: the bundled model
+    python research/gesture_seeds.py [MODEL_DIR ...]      # default: the bundled model
 """
 
 from __future__ import annotations

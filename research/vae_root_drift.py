@@ -16,7 +16,7 @@ the values given), and prints the medians over clips of
 :func:`umf.pipeline.delivered_joints`, with the clip's own contact labels): how much of the
 drift, and of the travel, survives anchoring.
 
-    python scripts/vae_root_drift.py [MODEL_DIR] [--labels wave-right-hand walk ...]
+    python research/vae_root_drift.py [MODEL_DIR] [--labels wave-right-hand walk ...]
         [--root-fusion 0.005 0.05] [--delivered] [--split test] [--corpus out/corpus]
 """
 
