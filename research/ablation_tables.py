@@ -48,8 +48,8 @@ WHAT = {
 
 def fmt(x: Any, digits: int = 3) -> str:
     """A report value (``[mean, ci]`` or a number) as ``mean ± ci``."""
-    from umf.eval.report import _pair
-    from umf.eval.report import fmt as report_fmt
+    from umf.eval.markdown import _pair
+    from umf.eval.markdown import fmt as report_fmt
 
     return report_fmt(*_pair(x), digits=digits)
 
@@ -91,7 +91,8 @@ def run_dir(source: dict[str, Any], runs: dict[str, Path]) -> Path | None:
 
 def retime(sources: list[dict[str, Any]], repeats: int) -> dict[str, float]:
     """Seconds per N = 2 scene (4 s, batch 1) for every model, measured in this process."""
-    from umf.eval.report import Contender, speed_section
+    from umf.eval.contenders import Contender
+    from umf.eval.report import speed_section
     from umf.pipeline import UMFPipeline
 
     loaded: dict[str, UMFPipeline] = {}
@@ -204,7 +205,7 @@ def main() -> None:
               for k in TABLES if (args.out / k / "metrics.json").exists()}  # fmt: skip
     if not tables:
         raise SystemExit(f"no ablation reports under {args.out}")
-    from umf.eval.report import md_table
+    from umf.eval.markdown import md_table
 
     parts = [
         "# Ablations: the paper's " + ", ".join(TABLES[k][0].split(":")[0] for k in tables)

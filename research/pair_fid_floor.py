@@ -32,9 +32,10 @@ import numpy as np
 import torch
 
 from umf.data.corpus import Corpus
+from umf.eval.contenders import load_evaluators
+from umf.eval.plan import default_evaluator_dir
 from umf.eval.protocol import aligned_scores, corpus_items
 from umf.eval.reconstruction import reconstruct
-from umf.eval.report import default_evaluator_dir, load_evaluators
 from umf.pipeline import UMFPipeline
 from umf.representation import (
     canonicalize_features,

@@ -72,7 +72,8 @@ def protocol(evaluator, items, recon, replications: int = 5) -> dict[str, float]
 
 
 def score(args: argparse.Namespace) -> None:
-    from umf.eval.report import default_evaluator_dir, load_evaluators
+    from umf.eval.contenders import load_evaluators
+    from umf.eval.plan import default_evaluator_dir
 
     torch.set_num_threads(args.threads)
     corpus = Corpus.load(args.corpus)

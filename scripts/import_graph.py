@@ -31,7 +31,8 @@ LAYERS: list[tuple[str, list[str]]] = [
     ("body and representation", ["umf.skeleton", "umf.representation", "umf.body_frame",
                                  "umf.kinematics", "umf.bvh", "umf.humanml3d"]),
     ("text and flows", ["umf.text", "umf.flows"]),
-    ("files: exports and pictures", ["umf.exports", "umf.writer", "umf.render"]),
+    ("files: exports and pictures", ["umf.exports", "umf.writer", "umf.render",
+                                     "umf.frame_files"]),
     ("motion container", ["umf.scene"]),
     ("data", ["umf.data"]),
     ("models", ["umf.models", "umf.checkpoint", "umf.model_checks"]),
@@ -151,12 +152,26 @@ def long_files() -> list[tuple[str, int]]:
             if (n := len(path.read_text().splitlines())) > MAX_LINES]  # fmt: skip
 
 
+def packages(g: dict[str, set[str]]) -> dict[str, set[str]]:
+    """The graph with each package's modules drawn as one box (``umf.data.*`` ->
+    ``umf.data``): the picture a newcomer reads first."""
+    short = lambda name: ".".join(name.split(".")[:2])  # noqa: E731
+    out: dict[str, set[str]] = defaultdict(set)
+    for a, targets in g.items():
+        out[short(a)] |= {short(b) for b in targets if short(b) != short(a)}
+    return dict(out)
+
+
 def draw(g: dict[str, set[str]], out: Path) -> None:
-    """Layers as rows (bottom first), each module a box, each import an arrow."""
+    """Layers as rows (bottom first), each module (or package) a box, each import an
+    arrow; arrows between boxes of one layer bow above the row."""
     import matplotlib
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    # text as text and no date or random ids: the same imports draw the same file
+    matplotlib.rcParams.update({"svg.fonttype": "none", "svg.hashsalt": "umf"})
 
     rows: dict[int, list[str]] = defaultdict(list)
     for name in sorted(g):
@@ -168,13 +183,15 @@ def draw(g: dict[str, set[str]], out: Path) -> None:
             pos[name] = ((i + 0.5) * width / len(names), k * 1.6)
     fig, ax = plt.subplots(figsize=(max(14, width * 1.25), len(LAYERS) * 1.25))
     up = set(upward(g))
-    for a, targets in g.items():
-        for b in targets:
+    for a in sorted(g):  # sorted: sets iterate in a different order every run
+        for b in sorted(g[a]):
             if a in pos and b in pos:
                 bad = (a, b) in up
+                same = pos[a][1] == pos[b][1]
                 ax.annotate("", xy=pos[b], xytext=pos[a], arrowprops=dict(
-                    arrowstyle="-|>", lw=1.4 if bad else 0.4, alpha=0.9 if bad else 0.18,
-                    color="crimson" if bad else "0.3", shrinkA=9, shrinkB=9))  # fmt: skip
+                    arrowstyle="-|>", lw=1.4 if bad else 0.6, alpha=0.9 if bad else 0.3,
+                    color="crimson" if bad else "0.3", shrinkA=11, shrinkB=11,
+                    connectionstyle="arc3,rad=-0.35" if same else "arc3,rad=0.0"))  # fmt: skip
     for name, (x, y) in pos.items():
         short = name.removeprefix("umf.")
         ax.text(x, y, short, ha="center", va="center", fontsize=7,
@@ -189,7 +206,8 @@ def draw(g: dict[str, set[str]], out: Path) -> None:
                  "(red: up a layer)", fontsize=10)  # fmt: skip
     fig.tight_layout()
     tmp = out.with_name(f".{out.name}.tmp")
-    fig.savefig(tmp, format=out.suffix.lstrip(".") or "svg")
+    kind = out.suffix.lstrip(".") or "svg"
+    fig.savefig(tmp, format=kind, metadata={"Date": None} if kind == "svg" else None)
     plt.close(fig)
     tmp.replace(out)
 
@@ -207,6 +225,8 @@ def report(g: dict[str, set[str]]) -> list[str]:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--svg", type=Path, help="draw the layers to this file (.svg or .png)")
+    ap.add_argument("--modules", action="store_true", help="draw every module, not each "
+                    "package as one box")  # fmt: skip
     ap.add_argument("--check", action="store_true", help="exit 1 on a circle, an arrow up "
                     f"or a file over {MAX_LINES} lines")  # fmt: skip
     args = ap.parse_args()
@@ -214,7 +234,7 @@ def main() -> None:
     lines = report(g)
     print("\n".join(lines))
     if args.svg:
-        draw(g, args.svg)
+        draw(g if args.modules else packages(g), args.svg)
         print(f"wrote {args.svg}")
     if args.check and len(lines) > 1:
         sys.exit(1)

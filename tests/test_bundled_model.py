@@ -35,7 +35,7 @@ def test_bundled_model_generates_without_a_path():
 
 def test_bundled_evaluator_loads():
     from umf.eval.evaluator import load_evaluator
-    from umf.eval.report import default_evaluator_dir
+    from umf.eval.plan import default_evaluator_dir
 
     for kind in ("interaction", "single"):
         ev = load_evaluator(default_evaluator_dir() / kind)

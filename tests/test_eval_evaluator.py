@@ -191,7 +191,7 @@ class ClassScenes(Dataset):
 
 def test_stage_learns_retrieval_and_checkpoint_reloads(tmp_path):
     pytest.importorskip("lightning_fabric")
-    from umf.train.datasets import make_loader
+    from umf.train.batching import make_loader
     from umf.train.evaluator_stage import EvaluatorStage, flush_denormals
     from umf.train.loop import train
 

@@ -2,7 +2,8 @@ import numpy as np
 import pytest
 import torch
 
-from umf.data.scenes import build_scene, compose_corpus
+from umf.data.composer import compose_corpus
+from umf.data.scenes import build_scene
 from umf.eval import physics as P
 
 FPS = 30.0

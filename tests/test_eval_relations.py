@@ -3,8 +3,9 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from umf.data.composer import compose_corpus
 from umf.data.relations import facing_dirs, lateral_offset, root_xz
-from umf.data.scenes import build_scene, compose_corpus, yaw_rotate
+from umf.data.scenes import build_scene, yaw_rotate
 from umf.eval.relations import real_scene_joints, relation_accuracy, scene_checks
 
 

@@ -23,6 +23,8 @@ from umf.cli.main import app, run
 from umf.config import EvaluatorConfig, set_option, small_config
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
+from umf.eval import markdown as MD
+from umf.eval import plan as P
 from umf.eval import report as R
 from umf.eval.evaluator import MotionTextEvaluator, evaluator_config_dict
 from umf.pipeline import UMFPipeline
@@ -131,7 +133,7 @@ def test_val_split_chooses_without_the_test_set(setup):
     assert "**val split**" in text and "--split val" in text and "val pairs" in text
     assert m["reconstruction"] and "single-person val clips" in text
     with pytest.raises(UMFError, match="--split"):
-        R.make_plan(split="train")
+        P.make_plan(split="train")
 
 
 def test_quick_eval_of_the_bundled_model(setup):
@@ -153,30 +155,30 @@ def test_quick_eval_of_the_bundled_model(setup):
 
 
 def test_plan_and_helpers():
-    quick = R.make_plan(quick=True, mm_samples=3)
+    quick = P.make_plan(quick=True, mm_samples=3)
     assert (quick.replications, quick.mm_prompts, quick.mm_pairs) == (2, 8, 3)
-    assert R.make_plan().replications == 20 and R.make_plan().accumulation_sizes[-1] == 8
-    assert R.length_batches([30, 40, 30, 30, 40], 2) == [[0, 2], [3], [1, 4]]
-    assert R.clamp_frames([3, 50, 400], 300) == [15, 50, 300]
-    assert R.bucket_frames([16, 30, 31, 290], 15, 300) == [30, 30, 45, 300]
-    assert R.bucket_frames([16, 31], 1, 300) == [16, 31]
-    assert R.batch_seed(0, 1) == R.batch_seed(0, 1) != R.batch_seed(0, 2)
-    assert R.parse_variant("no-pyramid=runs/a/model") == ("no-pyramid", R.Path("runs/a/model"), {})
-    assert R.parse_variant("25-25=m:pflow_steps=25,25:sflow_steps=4:guidance=2")[2] == {
+    assert P.make_plan().replications == 20 and P.make_plan().accumulation_sizes[-1] == 8
+    assert P.length_batches([30, 40, 30, 30, 40], 2) == [[0, 2], [3], [1, 4]]
+    assert P.clamp_frames([3, 50, 400], 300) == [15, 50, 300]
+    assert P.bucket_frames([16, 30, 31, 290], 15, 300) == [30, 30, 45, 300]
+    assert P.bucket_frames([16, 31], 1, 300) == [16, 31]
+    assert P.batch_seed(0, 1) == P.batch_seed(0, 1) != P.batch_seed(0, 2)
+    assert P.parse_variant("no-pyramid=runs/a/model") == ("no-pyramid", R.Path("runs/a/model"), {})
+    assert P.parse_variant("25-25=m:pflow_steps=25,25:sflow_steps=4:guidance=2")[2] == {
         "pflow_steps": (25, 25),
         "sflow_steps": 4,
         "guidance": 2.0,
     }
     for bad in ("x", "=m", "a=m:steps=3", "a=m:sflow_steps=many", "a=m:pflow_steps"):
         with pytest.raises(UMFError):
-            R.parse_variant(bad)
-    assert R.model_label(R.Path("runs/small/model")) == "small"
-    assert R.fmt(0.5, 0.01) == "0.500 ± 0.010" and R.fmt(float("nan")) == "—"
+            P.parse_variant(bad)
+    assert P.model_label(R.Path("runs/small/model")) == "small"
+    assert MD.fmt(0.5, 0.01) == "0.500 ± 0.010" and MD.fmt(float("nan")) == "—"
     assert R.jsonable({"a": (np.float32(1.5), float("inf"))}) == {"a": [1.5, None]}
 
 
 def test_variants_share_the_first_person_only_when_it_is_the_same(setup, monkeypatch):
-    plan, tiny = R.make_plan(quick=True), setup / "tiny" / "model"
+    plan, tiny = P.make_plan(quick=True), setup / "tiny" / "model"
     variants = [
         ("s-steps", tiny, {"sflow_steps": 2}),
         ("p-steps", tiny, {"pflow_steps": (2, 1)}),
@@ -220,7 +222,7 @@ def test_a_model_copy_with_other_guidance_is_another_first_person(setup, tmp_pat
         cfg = json.loads((tiny / "config.json").read_text())
         cfg[stage]["guidance"] = 1.5
         (tmp_path / name / "config.json").write_text(json.dumps(cfg))
-    plan = R.make_plan(quick=True)
+    plan = P.make_plan(quick=True)
     cs = R.load_contenders(tiny, [("p", tmp_path / "p"), ("s", tmp_path / "s")], "cpu", plan,
                            progress=False)  # fmt: skip
     keys = [R.person_one_key(c) for c in cs]
@@ -228,7 +230,7 @@ def test_a_model_copy_with_other_guidance_is_another_first_person(setup, tmp_pat
 
 
 def test_generation_keeps_each_length(setup):
-    plan = R.make_plan(quick=True)  # lengths bucketed by 15 frames, then cut back
+    plan = P.make_plan(quick=True)  # lengths bucketed by 15 frames, then cut back
     (c,) = R.load_contenders(setup / "tiny" / "model", [], "cpu", plan, progress=False)
     feats = c.features_fn(2)(
         ["a person waves", "two people bow", "a person runs"], [20, 37, 500], 0

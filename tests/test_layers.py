@@ -63,3 +63,12 @@ def test_inference_never_imports_training(graph):
     inference = [m for m in graph if not m.startswith(("umf.train", "umf.cli", "umf.serve"))
                  and m not in ("umf", "umf.__main__")]  # fmt: skip
     assert [(m, t) for m in inference for t in graph[m] if t.startswith("umf.train")] == []
+
+
+def test_the_picture_in_the_docs_is_drawn_from_todays_imports(ig, graph, tmp_path):
+    """docs/images/architecture.svg is what scripts/import_graph.py draws now (redraw it
+    with `python scripts/import_graph.py --svg docs/images/architecture.svg`)."""
+    out = tmp_path / "architecture.svg"
+    ig.draw(ig.packages(graph), out)
+    committed = SCRIPT.parents[1] / "docs" / "images" / "architecture.svg"
+    assert out.read_bytes() == committed.read_bytes(), "redraw docs/images/architecture.svg"

@@ -8,7 +8,7 @@ import pytest
 
 from conftest import load_script, save_tiny_model
 from umf.errors import UMFError
-from umf.eval.report import model_label
+from umf.eval.plan import model_label
 from umf.pipeline import UMFPipeline
 
 

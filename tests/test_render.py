@@ -11,6 +11,7 @@ import pytest
 import torch
 from PIL import Image
 
+import umf.frame_files as frame_files
 import umf.render as render
 from umf import skeleton as sk
 from umf.errors import UMFError
@@ -206,9 +207,9 @@ def test_left_side_drawn_lighter_on_screen_right(people):
 
 
 def test_gif_durations_keep_real_time():
-    d = render._gif_durations(300, 1 / 30)
+    d = frame_files.gif_durations(300, 1 / 30)
     assert sum(d) == 10_000 and set(d) == {30, 40}
-    assert render._gif_durations(3, 0.1) == [100, 100, 100]
+    assert frame_files.gif_durations(3, 0.1) == [100, 100, 100]
 
 
 def test_no_temp_files_left(people, tmp_path):

@@ -1,6 +1,7 @@
 import numpy as np
 import pytest
 
+from umf.data import composer as C
 from umf.data import scenes as S
 from umf.data.relations import check, check_record, facing_angle, min_interperson_distance
 
@@ -20,8 +21,8 @@ def test_actor_is_canonical(actors):
 
 
 def test_composer_is_deterministic_and_valid(actors):
-    a = S.compose_corpus(actors, 30, (2,), seed=5)
-    b = S.compose_corpus(list(reversed(actors)), 30, (2,), seed=5)
+    a = C.compose_corpus(actors, 30, (2,), seed=5)
+    b = C.compose_corpus(list(reversed(actors)), 30, (2,), seed=5)
     assert a == b
     assert len(a) == 30
     by_id = {x.id: x for x in actors}
@@ -36,11 +37,11 @@ def test_composer_is_deterministic_and_valid(actors):
         assert any(x.type == "no_contact" for x in results)
         assert len(r["captions"]) >= 3
         assert all(c[0].isupper() for c in r["captions"])
-    assert S.compose_corpus(actors, 30, (2,), seed=6) != a
+    assert C.compose_corpus(actors, 30, (2,), seed=6) != a
 
 
 def test_groups(actors):
-    groups = S.compose_corpus(actors, 12, (3, 4, 5, 6), seed=1)
+    groups = C.compose_corpus(actors, 12, (3, 4, 5, 6), seed=1)
     assert len(groups) == 12
     assert {r["num_people"] for r in groups} <= {3, 4, 5, 6}
     by_id = {x.id: x for x in actors}
@@ -57,7 +58,7 @@ def test_groups(actors):
 
 def test_captions_match_relation(actors):
     by_id = {x.id: x for x in actors}
-    recipes = S.compose_corpus(actors, 40, (2,), seed=2)
+    recipes = C.compose_corpus(actors, 40, (2,), seed=2)
     for r in recipes:
         j = S.build_scene(r, by_id)
         if r["relation"] in ("greet", "bow_back", "mirror", "spar"):
@@ -72,7 +73,7 @@ def test_captions_match_relation(actors):
 
 def test_checks_catch_violations(actors):
     by_id = {x.id: x for x in actors}
-    recipe = next(r for r in S.compose_corpus(actors, 20, (2,), seed=3) if r["relation"] == "greet")
+    recipe = next(r for r in C.compose_corpus(actors, 20, (2,), seed=3) if r["relation"] == "greet")
     j = S.build_scene(recipe, by_id)
     # turning person 2 around breaks "faces"
     bad = dict(recipe, people=[recipe["people"][0], dict(recipe["people"][1], yaw=0.0)])
@@ -85,7 +86,7 @@ def test_checks_catch_violations(actors):
     # side: moving the partner of a side-by-side walk to the other side flips the check
     walk = next(
         r
-        for r in S.compose_corpus(actors, 20, (2,), seed=3)
+        for r in C.compose_corpus(actors, 20, (2,), seed=3)
         if r["relation"] == "walk_side_by_side"
     )
     side = next(c for c in walk["constraints"] if c["type"] == "side")

@@ -21,6 +21,7 @@ from umf.representation import (
     joints_to_rot6d,
     mirror_features,
 )
+from umf.train import batching as B
 from umf.train import datasets as D
 
 
@@ -431,7 +432,7 @@ def test_scene_crop_matches_recanonicalised_full_scene(corpus):
 def test_collate_single_pads_and_masks(corpus):
     ds = D.SingleMotionDataset(corpus, "train", corpus.normalizer, 10, 50)
     items = [ds[i] for i in range(4)]
-    b = D.collate_single(items)
+    b = B.collate_single(items)
     t = max(it["length"] for it in items)
     assert b["features"].shape == (4, t, FEATURE_DIM) and b["mask"].shape == (4, t)
     for i, it in enumerate(items):
@@ -447,7 +448,7 @@ def test_collate_scenes_pads_people_and_time(corpus):
     pairs = D.SceneDataset(corpus, "train", corpus.normalizer, 10, 40)
     groups = D.SceneDataset(corpus, "test_groups", corpus.normalizer, 10, 40)
     items = [pairs[0], groups[0], pairs[1]]
-    b = D.collate_scenes(items)
+    b = B.collate_scenes(items)
     p = max(it["num_people"] for it in items)
     t = max(it["length"] for it in items)
     assert b["features"].shape == (3, p, t, FEATURE_DIM)
@@ -463,18 +464,18 @@ def test_collate_scenes_pads_people_and_time(corpus):
 def test_mixed_batches_alternate(corpus):
     single = D.SingleMotionDataset(corpus, "train", corpus.normalizer, 10, 30)
     scenes = D.SceneDataset(corpus, "train", corpus.normalizer, 10, 30)
-    a = D.make_loader(single, 4, shuffle=True)
-    b = D.make_loader(scenes, 4, shuffle=True)
-    batches = list(D.MixedBatches(a, b))
+    a = B.make_loader(single, 4, shuffle=True)
+    b = B.make_loader(scenes, 4, shuffle=True)
+    batches = list(B.MixedBatches(a, b))
     kinds = ["people_mask" in x for x in batches]
     assert kinds[:4] == [False, True, False, True]
     assert len(batches) >= 2 * max(len(a), len(b)) - 1
 
 
 def test_sharded_sampler_shards_and_resumes():
-    s0 = D.ShardedSampler(10, shuffle=True, seed=3, rank=0, world_size=3)
-    s1 = D.ShardedSampler(10, shuffle=True, seed=3, rank=1, world_size=3)
-    s2 = D.ShardedSampler(10, shuffle=True, seed=3, rank=2, world_size=3)
+    s0 = B.ShardedSampler(10, shuffle=True, seed=3, rank=0, world_size=3)
+    s1 = B.ShardedSampler(10, shuffle=True, seed=3, rank=1, world_size=3)
+    s2 = B.ShardedSampler(10, shuffle=True, seed=3, rank=2, world_size=3)
     shards = [list(s) for s in (s0, s1, s2)]
     assert all(len(s) == 4 for s in shards) and set().union(*shards) == set(range(10))
     epoch0 = list(s0)
@@ -486,16 +487,16 @@ def test_sharded_sampler_shards_and_resumes():
 
 
 def test_usable_workers_capped_at_the_cpus(monkeypatch):
-    monkeypatch.setattr(D.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
-    assert D.usable_workers(9) == 2 and D.usable_workers(1) == 1 and D.usable_workers(0) == 0
-    loader = D.make_loader(list(range(8)), 4, shuffle=False, num_workers=9)
+    monkeypatch.setattr(B.os, "sched_getaffinity", lambda pid: {0, 1}, raising=False)
+    assert B.usable_workers(9) == 2 and B.usable_workers(1) == 1 and B.usable_workers(0) == 0
+    loader = B.make_loader(list(range(8)), 4, shuffle=False, num_workers=9)
     assert loader.num_workers == 2
     # without affinity (macOS, Windows): the CPU count; unknown: one worker at most
-    monkeypatch.delattr(D.os, "sched_getaffinity", raising=False)
-    monkeypatch.setattr(D.os, "cpu_count", lambda: 3)
-    assert D.usable_workers(9) == 3
-    monkeypatch.setattr(D.os, "cpu_count", lambda: None)
-    assert D.usable_workers(9) == 1 and D.usable_workers(0) == 0
+    monkeypatch.delattr(B.os, "sched_getaffinity", raising=False)
+    monkeypatch.setattr(B.os, "cpu_count", lambda: 3)
+    assert B.usable_workers(9) == 3
+    monkeypatch.setattr(B.os, "cpu_count", lambda: None)
+    assert B.usable_workers(9) == 1 and B.usable_workers(0) == 0
 
 
 def test_corpus_captions_hold_every_respelled_and_mirrored_form(corpus):

@@ -16,8 +16,10 @@ from conftest import BANDAI_FIXTURE
 from umf.checkpoint import load_checkpoint, read_weights
 from umf.config import TrainConfig
 from umf.errors import UMFError
+from umf.train import batching as B
 from umf.train import datasets as D
-from umf.train.loop import lr_at, read_metrics, train
+from umf.train.loop import lr_at, train
+from umf.train.metrics import read_metrics
 
 TESTS = Path(__file__).resolve().parent
 SRC = TESTS.parent / "src"
@@ -89,7 +91,7 @@ def toy_loaders(batch_size: int = 8):
     a = DataLoader(ToyData(40), batch_size=batch_size, shuffle=True, drop_last=True)
     b = DataLoader(ToyData(24, seed=1), batch_size=batch_size, shuffle=True, drop_last=True)
     val = DataLoader(ToyData(16, seed=2), batch_size=batch_size)
-    return D.MixedBatches(a, b), val
+    return B.MixedBatches(a, b), val
 
 
 def run(out: Path, stage: ToyStage, cfg: TrainConfig, resume: bool = False) -> dict:
@@ -244,12 +246,12 @@ def test_real_corpus_mixed_batches(tmp_path):
             return {"total": float(self._loss(batch))}
 
     stage = Linear()
-    loaders = D.MixedBatches(
-        D.make_loader(single, 4, shuffle=True), D.make_loader(scenes, 4, shuffle=True)
+    loaders = B.MixedBatches(
+        B.make_loader(single, 4, shuffle=True), B.make_loader(scenes, 4, shuffle=True)
     )
     cfg = TrainConfig(lr=1e-3, warmup_steps=2, max_steps=6, log_every=2, val_every=3, ckpt_every=3)
     summary = train(
-        stage, loaders, D.make_loader(val, 2, shuffle=False), cfg, tmp_path / "run",
+        stage, loaders, B.make_loader(val, 2, shuffle=False), cfg, tmp_path / "run",
         normalizer=norm, progress=False, log=lambda s: None,
     )  # fmt: skip
     assert summary["steps"] == 6 and summary["best_val"] is not None

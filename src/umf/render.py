@@ -13,11 +13,9 @@ is +X). Matplotlib's 3-D axes have Z up, so a data point (x, y, z) is drawn at p
 
 from __future__ import annotations
 
-import itertools
 import math
 import textwrap
 from collections.abc import Callable, Iterator, Sequence
-from fractions import Fraction
 from pathlib import Path
 from typing import Any
 
@@ -30,6 +28,7 @@ from mpl_toolkits.mplot3d.art3d import Line3DCollection, Poly3DCollection
 from tqdm import tqdm
 
 from umf.errors import UMFError
+from umf.frame_files import gif_durations, write_gif, write_mp4
 from umf.io import atomic_path
 from umf.skeleton import CHAINS, NUM_JOINTS
 
@@ -394,87 +393,6 @@ def _frames(
             on_frame(done, len(indices))
 
 
-# ----------------------------------------------------------------- writers
-def _gif_durations(count: int, seconds_per_frame: float) -> list[int]:
-    """Per-frame delays in ms; GIFs store centiseconds, so the rounding error is spread
-    over frames (e.g. 30 fps -> 30, 40, 30 ms) instead of speeding the clip up."""
-    ticks = [round(i * seconds_per_frame * 100) for i in range(count + 1)]
-    return [max(1, b - a) * 10 for a, b in itertools.pairwise(ticks)]
-
-
-class _PaletteMapper:
-    """Exact nearest-colour mapping of RGB frames onto one fixed palette.
-
-    Pillow's own palette mapping goes through a coarse colour cache (white comes out as
-    252 grey); here every distinct 24-bit colour is looked up once and then cached.
-    """
-
-    def __init__(self, palette: np.ndarray) -> None:
-        self.palette = palette.astype(np.int32)  # (N, 3)
-        self.lut = np.zeros(1 << 24, dtype=np.uint16)  # 0: not seen yet, else index + 1
-
-    def __call__(self, frame: np.ndarray) -> np.ndarray:
-        f = frame.astype(np.uint32)
-        key = (f[..., 0] << 16) | (f[..., 1] << 8) | f[..., 2]
-        idx = self.lut[key]
-        if not idx.all():
-            new = np.unique(key[idx == 0])
-            rgb = np.stack([new >> 16, (new >> 8) & 255, new & 255], axis=-1).astype(np.int32)
-            for i in range(0, len(new), 4096):  # bounded memory for the distance table
-                d = ((rgb[i : i + 4096, None, :] - self.palette[None]) ** 2).sum(-1)
-                self.lut[new[i : i + 4096]] = d.argmin(1) + 1
-            idx = self.lut[key]
-        return (idx - 1).astype(np.uint8)
-
-
-def _write_gif(frames: Iterator[np.ndarray], path: Path, durations: list[int]) -> None:
-    from PIL import Image
-
-    # one palette (median cut of the first frame) for all frames: no colour flicker
-    first = next(frames)
-    quantized = Image.fromarray(first).quantize(
-        256, method=Image.Quantize.MEDIANCUT, dither=Image.Dither.NONE
-    )
-    palette = np.asarray(quantized.getpalette() or [], dtype=np.uint8).reshape(-1, 3)
-    to_index = _PaletteMapper(palette)
-
-    def indexed(frame: np.ndarray) -> Image.Image:
-        img = Image.frombytes("P", (frame.shape[1], frame.shape[0]), to_index(frame).tobytes())
-        img.putpalette(palette.tobytes())
-        return img
-
-    indexed(first).save(
-        path,
-        format="GIF",
-        save_all=True,
-        append_images=(indexed(frame) for frame in frames),
-        duration=durations,
-        loop=0,
-    )
-
-
-def _write_mp4(frames: Iterator[np.ndarray], path: Path, size: tuple[int, int], fps: float) -> None:
-    import imageio_ffmpeg
-
-    writer = imageio_ffmpeg.write_frames(
-        str(path),
-        size,
-        fps=Fraction(fps).limit_denominator(10000),
-        codec="libx264",
-        pix_fmt_out="yuv420p",
-        quality=7,
-        macro_block_size=1,
-        ffmpeg_log_level="error",
-        output_params=["-f", "mp4", "-movflags", "+faststart"],
-    )
-    writer.send(None)
-    try:
-        for frame in frames:
-            writer.send(frame)
-    finally:
-        writer.close()
-
-
 # ----------------------------------------------------------------- public API
 def render_frames(
     joints: Any,
@@ -558,9 +476,9 @@ def render_animation(
     ):
         frames = _frames(scene, indices, progress, f"render {path.name}", on_frame)
         if suffix == ".gif":
-            _write_gif(frames, tmp, _gif_durations(len(indices), stride / scene.fps))
+            write_gif(frames, tmp, gif_durations(len(indices), stride / scene.fps))
         else:
-            _write_mp4(frames, tmp, scene.size, scene.fps / stride)
+            write_mp4(frames, tmp, scene.size, scene.fps / stride)
     return path
 
 

@@ -27,7 +27,7 @@ def resolve_corpus(corpus: Path | None) -> Path:
 
 def resolve_evaluator(evaluator: Path | None) -> Path | None:
     """The given evaluator, else the bundled one when this install has it."""
-    from umf.eval.report import default_evaluator_dir
+    from umf.eval.plan import default_evaluator_dir
 
     if evaluator is not None:
         return evaluator
@@ -88,7 +88,8 @@ def evaluate(
 ) -> None:  # fmt: skip
     """Score a model (and variants) on the test split (or val); write report.md, metrics.json,
     PNGs."""
-    from umf.eval.report import EvalRequest, make_plan, model_label, parse_variant, run_eval
+    from umf.eval.plan import make_plan, model_label, parse_variant
+    from umf.eval.report import EvalRequest, run_eval
 
     plan = make_plan(quick, replications, mm_prompts, mm_samples, seed, batch, length_step, split)
     variants = [parse_variant(v) for v in variant]

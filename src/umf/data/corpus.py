@@ -33,8 +33,9 @@ import torch
 from tqdm import tqdm
 
 from umf.data.clip import FPS, MotionClip
+from umf.data.composer import compose_corpus
 from umf.data.humanml3d import SkippedItemWarning
-from umf.data.scenes import Actor, build_scene, build_scene_features, compose_corpus
+from umf.data.scenes import Actor, build_scene, build_scene_features
 from umf.errors import UMFError
 from umf.io import atomic_path, remove_stale_temporaries, write_json_atomic
 from umf.representation import (

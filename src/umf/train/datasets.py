@@ -30,21 +30,19 @@ resumed run sees exactly the data an uninterrupted run would have seen.
 from __future__ import annotations
 
 import math
-import os
 from collections import Counter
-from collections.abc import Hashable, Iterator, Sequence
+from collections.abc import Hashable, Sequence
 from typing import Any
 
 import numpy as np
 import torch
-from torch.utils.data import DataLoader, Dataset, Sampler
+from torch.utils.data import Dataset
 
 from umf.config import metadata_pairs
 from umf.data.clip import FPS, MotionClip
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.representation import (
-    FEATURE_DIM,
     Normalizer,
     RigidTransform,
     assemble_features,
@@ -56,6 +54,7 @@ from umf.representation import (
 )
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import swap_words, word_pattern
+from umf.train.batching import collate_scenes, collate_single
 
 Tensor = torch.Tensor
 
@@ -585,156 +584,3 @@ class SceneDataset(_EpochDataset):
     @staticmethod
     def collate(items: list[dict[str, Any]]) -> dict[str, Any]:
         return collate_scenes(items)
-
-
-# --------------------------------------------------------------------- batching
-def _meta(items: list[dict[str, Any]]) -> dict[str, Any]:
-    return {
-        "lengths": torch.tensor([it["length"] for it in items], dtype=torch.long),
-        "captions": [it["caption"] for it in items],
-        "dataset": torch.tensor([it["dataset"] for it in items], dtype=torch.long),
-        "ids": [it["id"] for it in items],
-    }
-
-
-def collate_single(items: list[dict[str, Any]]) -> dict[str, Any]:
-    """Pad to the batch's longest crop: features (B, T, 262), mask (B, T) True on frames."""
-    t = max(it["features"].shape[0] for it in items)
-    feats = torch.zeros(len(items), t, FEATURE_DIM)
-    mask = torch.zeros(len(items), t, dtype=torch.bool)
-    for i, it in enumerate(items):
-        n = it["features"].shape[0]
-        feats[i, :n] = it["features"]
-        mask[i, :n] = True
-    return {"features": feats, "mask": mask, **_meta(items)}
-
-
-def collate_scenes(items: list[dict[str, Any]]) -> dict[str, Any]:
-    """Pad time and people: features (B, P, T, 262), mask (B, T), people_mask (B, P)."""
-    t = max(it["features"].shape[1] for it in items)
-    p = max(it["features"].shape[0] for it in items)
-    feats = torch.zeros(len(items), p, t, FEATURE_DIM)
-    mask = torch.zeros(len(items), t, dtype=torch.bool)
-    people = torch.zeros(len(items), p, dtype=torch.bool)
-    for i, it in enumerate(items):
-        n_p, n_t = it["features"].shape[:2]
-        feats[i, :n_p, :n_t] = it["features"]
-        mask[i, :n_t] = True
-        people[i, :n_p] = True
-    num_people = torch.tensor([it["num_people"] for it in items], dtype=torch.long)
-    return {
-        "features": feats,
-        "mask": mask,
-        "people_mask": people,
-        "num_people": num_people,
-        **_meta(items),
-    }
-
-
-class ShardedSampler(Sampler[int]):
-    """Seeded, epoch-keyed shuffling, sharded by rank, resumable mid-epoch.
-
-    Like ``DistributedSampler`` (padding so every rank gets the same count), plus
-    ``start``: the number of this rank's indices of the current epoch to skip, so a
-    resumed run continues an epoch without loading the skipped items.
-    """
-
-    def __init__(
-        self,
-        num_items: int,
-        *,
-        shuffle: bool,
-        seed: int = 0,
-        rank: int = 0,
-        world_size: int = 1,
-    ) -> None:
-        if num_items <= 0:
-            raise UMFError("cannot sample from an empty dataset")
-        self.num_items, self.shuffle, self.seed = num_items, shuffle, seed
-        self.rank, self.world_size = rank, world_size
-        self.epoch, self.start = 0, 0
-
-    def set_epoch(self, epoch: int) -> None:
-        self.epoch = int(epoch)
-
-    def indices(self) -> np.ndarray:
-        """This rank's indices of the current epoch (before skipping ``start``)."""
-        n = self.num_items
-        order = (
-            np.random.default_rng([self.seed, self.epoch]).permutation(n)
-            if self.shuffle
-            else np.arange(n)
-        )
-        total = math.ceil(n / self.world_size) * self.world_size
-        return np.resize(order, total)[self.rank :: self.world_size]
-
-    def __iter__(self) -> Iterator[int]:
-        return iter(self.indices()[self.start :].tolist())
-
-    def __len__(self) -> int:
-        return max(math.ceil(self.num_items / self.world_size) - self.start, 0)
-
-
-def usable_workers(num_workers: int) -> int:
-    """At most one loader worker per CPU this process may use: a config written on a
-    16-core GPU machine (``num_workers`` 9) then fine-tuned on a laptop must not fork 9."""
-    cpus = len(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else os.cpu_count()
-    return max(0, min(num_workers, cpus or 1))
-
-
-def make_loader(
-    dataset: Dataset,
-    batch_size: int,
-    *,
-    shuffle: bool,
-    num_workers: int = 0,
-    drop_last: bool | None = None,
-    seed: int = 0,
-) -> DataLoader:
-    """A DataLoader with the dataset's own collate function (train: shuffle, drop_last).
-
-    ``batch_size`` is per device; the trainer re-shards the loader across ranks.
-    """
-    return DataLoader(
-        dataset,
-        batch_size=batch_size,
-        shuffle=shuffle,
-        num_workers=usable_workers(num_workers),
-        collate_fn=getattr(dataset, "collate", None),
-        drop_last=shuffle if drop_last is None else drop_last,
-        generator=torch.Generator().manual_seed(seed),
-    )
-
-
-class MixedBatches:
-    """Alternate whole batches from several loaders (SPEC 6: single- and multi-person).
-
-    The trainer takes batch ``step % len(loaders)`` from an endless, resumable stream of
-    each loader. Iterating directly yields one batch of each in turn, restarting a loader
-    that runs out, until every loader has been through at least once.
-    """
-
-    def __init__(self, *loaders: DataLoader) -> None:
-        if not loaders:
-            raise UMFError("MixedBatches needs at least one loader")
-        self.loaders = list(loaders)
-
-    def __len__(self) -> int:
-        return len(self.loaders) * max(len(lo) for lo in self.loaders)
-
-    def __iter__(self) -> Iterator[Any]:
-        its = [iter(lo) for lo in self.loaders]
-        done = [False] * len(its)
-        while True:
-            for i, lo in enumerate(self.loaders):
-                try:
-                    batch = next(its[i])
-                except StopIteration:
-                    done[i] = True
-                    if all(done):
-                        return
-                    its[i] = iter(lo)
-                    batch = next(its[i], None)
-                    if batch is None:
-                        raise UMFError(f"loader {i} of MixedBatches yields no batch") from None
-                yield batch

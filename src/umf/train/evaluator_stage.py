@@ -35,7 +35,8 @@ from umf.eval.evaluator import (
 )
 from umf.eval.metrics import r_precision
 from umf.text import TextFeatureCache
-from umf.train.datasets import SceneDataset, SingleMotionDataset, make_loader
+from umf.train.batching import make_loader
+from umf.train.datasets import SceneDataset, SingleMotionDataset
 
 GROUP = 96  # the protocol's retrieval group (validation batch size)
 

@@ -14,19 +14,18 @@ takes the same batches and random draws as an uninterrupted run, on any number o
 from __future__ import annotations
 
 import contextlib
-import csv
 import dataclasses
 import math
 import random
 import time
 from collections.abc import Callable, Iterator, Mapping, Sequence
 from pathlib import Path
-from typing import Any, NamedTuple, Protocol
+from typing import Any, Protocol
 
 import numpy as np
 import torch
 from torch import Tensor, nn
-from torch.utils.data import DataLoader, IterableDataset, RandomSampler
+from torch.utils.data import DataLoader
 from tqdm import tqdm
 
 from umf.checkpoint import (
@@ -39,13 +38,13 @@ from umf.checkpoint import (
 )
 from umf.config import TrainConfig
 from umf.errors import UMFError
-from umf.io import atomic_path, remove_stale_temporaries
+from umf.io import remove_stale_temporaries
 from umf.representation import Normalizer
-from umf.train.datasets import MixedBatches, ShardedSampler
+from umf.train.batching import MixedBatches, Stream, loaders_of, validation_loader
+from umf.train.ema import EMA
+from umf.train.metrics import CURVES_FILE, MetricsLog, plot_curves
 
 LAST, BEST = "last", "best"
-METRICS_FILE, CURVES_FILE = "metrics.csv", "loss_curves.png"
-NOT_PLOTTED = frozenset({"lr", "grad_norm"})
 Log = Callable[[str], None]
 
 
@@ -125,237 +124,6 @@ def _forked_rng(device: torch.device) -> Iterator[None]:
         yield
     random.setstate(py)
     np.random.set_state(npy)  # noqa: NPY002
-
-
-# --------------------------------------------------------------------- EMA
-class EMA:
-    """Exponential moving average of the trainable parameters.
-
-    The decay ramps up as min(decay, (1 + n) / (10 + n)) so early averages are not stuck
-    at the random initialisation.
-    """
-
-    def __init__(self, module: nn.Module, decay: float) -> None:
-        self.decay = decay
-        self.params = {n: p for n, p in module.named_parameters() if p.requires_grad}
-        self.shadow = {n: p.detach().clone() for n, p in self.params.items()}
-        self.num_updates = 0
-
-    @torch.no_grad()
-    def update(self) -> None:
-        self.num_updates += 1
-        d = min(self.decay, (1 + self.num_updates) / (10 + self.num_updates))
-        for name, p in self.params.items():
-            self.shadow[name].lerp_(p.detach(), 1.0 - d)
-
-    def by_id(self) -> dict[int, Tensor]:
-        return {id(p): self.shadow[n] for n, p in self.params.items()}
-
-    @contextlib.contextmanager
-    def applied(self) -> Iterator[None]:
-        """Temporarily put the averaged weights into the module (for validation)."""
-        backup = {n: p.detach().clone() for n, p in self.params.items()}
-        with torch.no_grad():
-            for n, p in self.params.items():
-                p.copy_(self.shadow[n])
-        try:
-            yield
-        finally:
-            with torch.no_grad():
-                for n, p in self.params.items():
-                    p.copy_(backup[n])
-
-    def state_dict(self) -> dict[str, Any]:
-        raw = {n: p.detach() for n, p in self.params.items()}
-        return {"decay": self.decay, "num_updates": self.num_updates,
-                "shadow": self.shadow, "raw": raw}  # fmt: skip
-
-    @torch.no_grad()
-    def load_state_dict(self, state: Mapping[str, Any]) -> None:
-        """Restore the averages and the raw weights (checkpoint files hold the averages)."""
-        missing = set(self.params) - set(state["shadow"])
-        if missing:
-            raise UMFError(f"EMA state lacks {sorted(missing)[0]} (different model?)")
-        self.num_updates = int(state["num_updates"])
-        for n, p in self.params.items():
-            self.shadow[n].copy_(state["shadow"][n])
-            if "raw" in state:
-                p.copy_(state["raw"][n])
-
-
-# --------------------------------------------------------------------- data streams
-def _with_sampler(loader: DataLoader, sampler: ShardedSampler, seed: int) -> DataLoader:
-    """The same loader (batch size, collate, workers) drawing indices from ``sampler``."""
-    if isinstance(loader.dataset, IterableDataset) or loader.batch_size is None:
-        raise UMFError("train() needs DataLoaders over map-style datasets with a batch_size")
-    workers = loader.num_workers
-    return DataLoader(
-        loader.dataset,
-        batch_size=loader.batch_size,
-        sampler=sampler,
-        num_workers=workers,
-        collate_fn=loader.collate_fn,
-        pin_memory=loader.pin_memory,
-        drop_last=loader.drop_last,
-        timeout=loader.timeout,
-        worker_init_fn=loader.worker_init_fn,
-        multiprocessing_context=loader.multiprocessing_context if workers else None,
-        generator=torch.Generator().manual_seed(seed),
-        prefetch_factor=loader.prefetch_factor if workers else None,
-        # workers are restarted each epoch so they see the dataset's new epoch
-        persistent_workers=False,
-    )
-
-
-class _Stream:
-    """An endless, resumable iterator over one loader: (epoch, batches consumed) is its state."""
-
-    def __init__(self, loader: DataLoader, *, seed: int, rank: int, world_size: int) -> None:
-        shuffle = isinstance(loader.sampler, RandomSampler)
-        n = len(loader.dataset)  # type: ignore[arg-type]
-        self.sampler = ShardedSampler(
-            n, shuffle=shuffle, seed=seed, rank=rank, world_size=world_size
-        )
-        self.loader = _with_sampler(loader, self.sampler, seed)
-        self.epoch, self.consumed = 0, 0
-        self._it: Iterator[Any] | None = None
-
-    def _begin(self) -> None:
-        self.sampler.set_epoch(self.epoch)
-        self.sampler.start = self.consumed * int(self.loader.batch_size or 1)
-        set_epoch = getattr(self.loader.dataset, "set_epoch", None)
-        if callable(set_epoch):
-            set_epoch(self.epoch)
-        self._it = iter(self.loader)
-
-    def __next__(self) -> Any:
-        for _ in range(2):
-            if self._it is None:
-                self._begin()
-            try:
-                batch = next(self._it)  # type: ignore[arg-type]
-            except StopIteration:
-                self._it, self.epoch, self.consumed = None, self.epoch + 1, 0
-                continue
-            self.consumed += 1
-            return batch
-        raise UMFError(
-            "a training loader yields no batch (dataset smaller than batch_size with drop_last?)"
-        )
-
-    def state_dict(self) -> dict[str, int]:
-        return {"epoch": self.epoch, "consumed": self.consumed}
-
-    def load_state_dict(self, state: Mapping[str, int]) -> None:
-        self.epoch, self.consumed, self._it = int(state["epoch"]), int(state["consumed"]), None
-
-
-def _val_loader(loader: DataLoader, seed: int, rank: int, world_size: int) -> DataLoader:
-    """Each rank validates its own shard, in order, the same items every time."""
-    n = len(loader.dataset)  # type: ignore[arg-type]
-    sampler = ShardedSampler(n, shuffle=False, seed=seed, rank=rank, world_size=world_size)
-    return _with_sampler(loader, sampler, seed)
-
-
-def _loaders(source: DataLoader | MixedBatches | None) -> list[DataLoader]:
-    if source is None:
-        return []
-    return list(source.loaders) if isinstance(source, MixedBatches) else [source]
-
-
-# --------------------------------------------------------------------- metrics
-class Row(NamedTuple):
-    step: int
-    split: str
-    name: str
-    value: float
-    time: float
-
-
-class MetricsLog:
-    """``metrics.csv`` (step, split, name, value, time) + optional TensorBoard + history."""
-
-    HEADER = ("step", "split", "name", "value", "time")
-
-    def __init__(self, out_dir: Path, *, resume_step: int | None, tensorboard: bool, log: Log):
-        self.path = out_dir / METRICS_FILE
-        self.rows: list[Row] = []
-        if resume_step is not None and self.path.exists():
-            # drop what a killed run logged after its last checkpoint
-            self.rows = [r for r in read_metrics(self.path) if r.step <= resume_step]
-        self._rewrite()
-        self.tb = _tensorboard(out_dir, resume_step or 0, log) if tensorboard else None
-
-    def _rewrite(self) -> None:
-        with atomic_path(self.path) as tmp, open(tmp, "w", newline="") as fh:
-            w = csv.writer(fh)
-            w.writerow(self.HEADER)
-            w.writerows(self.rows)
-
-    def add(self, step: int, split: str, values: Mapping[str, float], seconds: float) -> None:
-        new = [Row(step, split, k, float(v), round(seconds, 3)) for k, v in values.items()]
-        self.rows.extend(new)
-        with open(self.path, "a", newline="") as fh:
-            csv.writer(fh).writerows(new)
-        if self.tb is not None:
-            for r in new:
-                self.tb.add_scalar(f"{split}/{r.name}", r.value, step)
-            self.tb.flush()
-
-    def close(self) -> None:
-        if self.tb is not None:
-            self.tb.close()
-
-
-def read_metrics(path: Path) -> list[Row]:
-    with open(path, newline="") as fh:
-        reader = csv.DictReader(fh)
-        return [
-            Row(int(r["step"]), r["split"], r["name"], float(r["value"]), float(r["time"]))
-            for r in reader
-        ]
-
-
-def _tensorboard(out_dir: Path, purge_step: int, log: Log) -> Any:
-    try:
-        from torch.utils.tensorboard import SummaryWriter
-    except ImportError:
-        log("tensorboard is not installed: metrics go to metrics.csv only")
-        return None
-    return SummaryWriter(str(out_dir / "tensorboard"), purge_step=purge_step)
-
-
-def plot_curves(rows: Sequence[Row], path: Path) -> None:
-    """One panel per loss term, train line + val points, written atomically as PNG."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    names = sorted({r.name for r in rows if r.name not in NOT_PLOTTED})
-    if not names:
-        return
-    cols = min(3, len(names))
-    nrows = math.ceil(len(names) / cols)
-    fig = Figure(figsize=(4.2 * cols, 3.2 * nrows), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(nrows, cols, squeeze=False).ravel()
-    for ax, name in zip(axes, names, strict=False):
-        values = []
-        for split, style in (("train", "-"), ("val", "o-")):
-            pts = [(r.step, r.value) for r in rows
-                   if r.name == name and r.split == split and math.isfinite(r.value)]  # fmt: skip
-            if pts:
-                ax.plot(*zip(*pts, strict=True), style, label=split, markersize=3)
-                values += [v for _, v in pts]
-        if values and min(values) > 0:
-            ax.set_yscale("log")
-        ax.set_title(name)
-        ax.set_xlabel("step")
-        ax.grid(alpha=0.3)
-        ax.legend(fontsize=8)
-    for ax in axes[len(names) :]:
-        ax.set_visible(False)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
 
 
 def _reduce_means(
@@ -442,7 +210,7 @@ class _Run:
     optimizer: Any
     scheduler: torch.optim.lr_scheduler.LRScheduler
     ema: EMA | None
-    streams: list[_Stream]
+    streams: list[Stream]
     val_loaders: list[DataLoader]
     metrics: MetricsLog | None
     config: dict[str, Any]
@@ -759,15 +527,15 @@ def _build(
     ema = EMA(trainable, cfg.ema_decay) if cfg.ema_decay is not None else None
     rank, world = fabric.global_rank, fabric.world_size
     streams = [
-        _Stream(lo, seed=cfg.seed + 1_000_003 * i, rank=rank, world_size=world)
-        for i, lo in enumerate(_loaders(train_loader))
+        Stream(lo, seed=cfg.seed + 1_000_003 * i, rank=rank, world_size=world)
+        for i, lo in enumerate(loaders_of(train_loader))
     ]
     if not streams:
         raise UMFError("no training loader")
     sizes = [s.loader.batch_size for s in streams]
     if cfg.batch_size not in sizes:
         say(f"note: training loaders use batch sizes {sizes}, cfg.batch_size is {cfg.batch_size}")
-    vals = [_val_loader(lo, cfg.seed, rank, world) for lo in _loaders(val_loader)]
+    vals = [validation_loader(lo, cfg.seed, rank, world) for lo in loaders_of(val_loader)]
     resume_step = ck.step if ck is not None else None
     metrics = (
         MetricsLog(out, resume_step=resume_step, tensorboard=tensorboard, log=say)

@@ -30,13 +30,8 @@ from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.io import write_json_atomic
 from umf.representation import Normalizer
-from umf.train.datasets import (
-    MixedBatches,
-    SceneDataset,
-    SingleMotionDataset,
-    check_labels,
-    make_loader,
-)
+from umf.train.batching import MixedBatches, make_loader
+from umf.train.datasets import SceneDataset, SingleMotionDataset, check_labels
 
 STAGES = ("vae", "pflow", "sflow")
 
