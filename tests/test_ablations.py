@@ -41,8 +41,8 @@ def text(b: int, dim: int = 16, length: int = 5) -> TextFeatures:
     return TextFeatures(tokens, mask, tokens.mean(1))
 
 
-@pytest.mark.parametrize("name", sorted(ABLATIONS))
-def test_ablation_trains_and_samples(name):
+def _run(name: str) -> dict:
+    """Build the ablation, take one loss of each model and sample once (fixed seeds)."""
     torch.manual_seed(0)
     cfg = small_config()
     for o in TINY + ABLATIONS[name]:
@@ -53,8 +53,6 @@ def test_ablation_trains_and_samples(name):
     losses = vae_losses(vae(x, mask), x, mask, norm, cfg.vae)
     losses["total"].backward()
     p, r = vae.latent_shape
-    if not cfg.vae.latent_adapter:
-        assert r == cfg.vae.d_model
     pflow = PFlow(cfg.pflow, p, r, 16)
     sflow = SFlow(cfg.sflow, p, r, 16, backbone=pflow.net if cfg.sflow.shared_backbone else None)
     z = torch.randn(4, p, r)
@@ -63,22 +61,65 @@ def test_ablation_trains_and_samples(name):
     prev, prev_mask = torch.randn(4, 2, p, r), torch.tensor([[1, 0], [1, 1], [1, 1], [1, 0]]).bool()
     sl = sflow.loss(prev, prev_mask, z, text(4), text(4, length=1))
     sl["total"].backward()
-    if cfg.sflow.reaction_only or cfg.sflow.lambda_recon == 0:
-        total, reaction = float(sl["total"].detach()), float(sl["reaction"].detach())
-        assert total == pytest.approx(reaction, rel=1e-6)
     gen = torch.Generator().manual_seed(0)
     z1, nfe1 = pflow.sample(text(2), text(2, length=1), generator=gen)
     w, nfe2 = sflow.sample(z1[:, None], torch.ones(2, 1, dtype=torch.bool), text(2),
                            text(2, length=1), generator=gen)  # fmt: skip
-    assert z1.shape == w.shape == (2, p, r)
+    return {"cfg": cfg, "vae": vae, "vae_loss": float(losses["total"].detach()), "latent": (p, r),
+            "pflow_loss": float(pl["total"].detach()), "sflow": sl, "z1": z1, "w": w, "nfe": (nfe1, nfe2),
+            "params": sum(m.numel() for m in [*pflow.parameters(), *sflow.parameters()])}  # fmt: skip
+
+
+@pytest.mark.parametrize("name", sorted(ABLATIONS))
+def test_ablation_trains_and_samples(name):
+    out = _run(name)
+    cfg, (p, r), (nfe1, nfe2) = out["cfg"], out["latent"], out["nfe"]
+    if not cfg.vae.latent_adapter:
+        assert r == cfg.vae.d_model
+    sl = out["sflow"]
+    if cfg.sflow.reaction_only or cfg.sflow.lambda_recon == 0:
+        total, reaction = float(sl["total"].detach()), float(sl["reaction"].detach())
+        assert total == pytest.approx(reaction, rel=1e-6)
+    assert out["z1"].shape == out["w"].shape == (2, p, r)
     per_step = 2 if "heun" in name else 1
-    assert (
-        nfe1 == sum(cfg.pflow.steps) * per_step
-        if cfg.pflow.num_stages > 1 or name != "single_token"
-        else True
-    )
+    steps = cfg.pflow.steps if len(cfg.pflow.steps) == cfg.pflow.num_stages else (
+        sum(cfg.pflow.steps),)  # one stage given two counts integrates their sum  # fmt: skip
+    assert nfe1 == sum(steps) * per_step, (nfe1, cfg.pflow.steps)
     assert nfe2 == cfg.sflow.steps * per_step
-    assert torch.isfinite(z1).all() and torch.isfinite(w).all()
+    assert torch.isfinite(out["z1"]).all() and torch.isfinite(out["w"]).all()
+
+
+def _differences(a: dict, b: dict) -> list[str]:
+    keys = ["vae_loss", "latent", "pflow_loss", "nfe", "params"]
+    out = [k for k in keys if a[k] != b[k]]
+    out += [k for k in ("z1", "w") if a[k].shape != b[k].shape or not torch.equal(a[k], b[k])]
+    if float(a["sflow"]["total"].detach()) != float(b["sflow"]["total"].detach()):
+        out.append("sflow_loss")
+    return out
+
+
+# What each switch must change against the full model under the same seeds: its own part
+# (the first-person sample z1 comes from a fixed generator, so it moves only when the
+# P-Flow or its sampling does; sflow_loss only when the S-Flow objective does).
+EFFECTS = {
+    "no_pyramid": {"z1"}, "grid_pyramid": {"z1"}, "three_stages": {"nfe", "z1"},
+    "reaction_only": {"sflow_loss", "w"}, "no_recon_loss": {"sflow_loss"},
+    "no_context_adapter": {"params", "w"}, "shared_backbone": {"params", "w"},
+    "single_token": {"latent"}, "no_latent_adapter": {"latent"}, "heun": {"nfe", "z1"},
+    "unconditional_fine_stage": {"z1"}, "early_fine_stage": {"z1"}, "detail_norm": {"z1"},
+    "detail_norm_grid": {"z1"},
+}  # fmt: skip
+
+
+def test_each_ablation_switch_changes_the_model():
+    """Same seeds, one switch flipped: what the switch is about changes (a switch the code
+    ignored would leave every loss and sample of the full model as they were)."""
+    assert set(EFFECTS) == set(ABLATIONS) - {"full"}
+    full = _run("full")
+    changed = {name: set(_differences(_run(name), full)) for name in EFFECTS}
+    missing = {k: sorted(EFFECTS[k] - v) for k, v in changed.items() if not EFFECTS[k] <= v}
+    assert not missing, missing
+    assert not {"z1", "pflow_loss"} & changed["no_recon_loss"]  # an S-Flow switch only
 
 
 def test_shared_backbone_model_loads_the_fine_tuned_transformer_for_both_flows(tmp_path):

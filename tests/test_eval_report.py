@@ -227,6 +227,9 @@ def test_a_model_copy_with_other_guidance_is_another_first_person(setup, tmp_pat
                            progress=False)  # fmt: skip
     keys = [R.person_one_key(c) for c in cs]
     assert keys[0] == keys[2] != keys[1]
+    # and the scenes themselves: the key is a shortcut, the scenes are what it stands for
+    one = [c.features_fn(1)(["a person waves"], [30], 0)[0] for c in cs]
+    assert np.array_equal(one[0], one[2]) and not np.allclose(one[0], one[1], atol=1e-4)
 
 
 def test_generation_keeps_each_length(setup):

@@ -363,3 +363,35 @@ def test_sampler_steps_and_determinism() -> None:
     assert torch.equal(a.x, b.x) and not torch.equal(a.x, c.x)
     with pytest.raises(ValueError):
         sample_pyramid(v, noise, cfg, steps=(10,), cond={"scale": 0.1})
+
+
+@pytest.mark.parametrize("layout", ["1d", "2d"])
+def test_the_sampler_jumps_to_the_finer_stages_training_start(layout: Layout) -> None:
+    """Inside sample_pyramid (not the jump function alone): with the exact velocity of a
+    point mass at z1, the state the fine stage first sees must have the mean s Up(Down z1)
+    and covariance (1 - s)^2 I of its training start. A sampler that re-noised with another
+    alpha (half of it: cov z ~ 10^3) or mean factor fails; the oracle recovery test
+    above cannot see either, since the oracle ends at the data from any start."""
+    cfg = PyramidConfig(layout=layout, num_stages=2)
+    n, width = 512, 8
+    z1 = torch.randn(1, P, width, generator=_gen(21), dtype=MC)
+    first_fine: list[torch.Tensor] = []
+    oracle = _delta_oracle(z1.expand(n, -1, -1), cfg, [])
+
+    def v(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor) -> torch.Tensor:
+        if int(stage[0]) == 1 and not first_fine:
+            first_fine.append(x.clone())
+        return oracle(x, t, stage=stage)
+
+    noise = initial_noise(cfg, n, width, generator=_gen(22), dtype=MC)
+    out = sample_pyramid(v, noise, cfg, steps=(8, 2), generator=_gen(23))
+    torch.testing.assert_close(out.x, z1.expand(n, -1, -1), atol=1e-4, rtol=0)
+    s = cfg.window(1).start
+    dev = first_fine[0] - s * up(down(z1, layout), layout)
+    samples = n * width
+    mean_z = dev.mean(0).abs().max().item() / ((1 - s) / math.sqrt(n))
+    flat = dev.permute(0, 2, 1).reshape(-1, P)
+    cov = flat.T @ flat / samples
+    cov_sd = (1 - s) ** 2 * torch.where(torch.eye(P, dtype=torch.bool), math.sqrt(2), 1.0)
+    cov_z = ((cov - (1 - s) ** 2 * torch.eye(P)).abs() / (cov_sd / math.sqrt(samples))).max()
+    assert mean_z < Z_OK and float(cov_z) < Z_OK, (mean_z, float(cov_z))

@@ -41,6 +41,9 @@ def test_a_scene_does_not_depend_on_its_batch(pipe):
     assert not np.allclose(copies[1].joints, alone, atol=1e-2)  # another sample, not a copy
     again = _call(pipe, ["b", "a person walks"], sample_indices=[0, 1])[1]
     assert np.allclose(again.joints, copies[1].joints, atol=1e-4)  # sample 1, wherever it is
+    first = _call(pipe, ["a person walks", "b"], sample_indices=[1, 0])[0]  # sample 1 first:
+    assert np.allclose(first.joints, copies[1].joints, atol=1e-4)  # its index picks its noise,
+    assert not np.allclose(first.joints, alone, atol=1e-2)  # not its place in the call
 
 
 def test_chunking_does_not_change_scenes(pipe, monkeypatch):

@@ -119,3 +119,21 @@ def test_normalizer_round_trip(tmp_path, real_joints):
     norm.save(tmp_path / "n.safetensors")
     back = rep.Normalizer.load(tmp_path / "n.safetensors")
     assert torch.equal(back.mean, norm.mean) and torch.equal(back.std, norm.std)
+
+
+def test_transform_features_moves_positions_and_turns_velocities_both_ways(real_joints):
+    """Features moved into a frame are the features of the moved joints, velocities
+    included, and ``inverse`` moves them back out: a velocity turned the wrong way (the
+    react path moves people 2..N out of the model's frame this way) is 2 sin(yaw/2) of the
+    speed off."""
+    tf = rep.RigidTransform(yaw=1.1, origin=(0.7, 0.0, -1.3))  # on the floor: same contacts
+    f = rep.joints_to_features(real_joints)
+    moved = rep.transform_features(f, tf)
+    want = rep.joints_to_features(tf.apply(real_joints))
+    torch.testing.assert_close(moved[..., rep.VEL], want[..., rep.VEL], atol=1e-12, rtol=0)
+    torch.testing.assert_close(moved, want, atol=1e-12, rtol=0)
+    out = rep.transform_features(want, tf, inverse=True)
+    torch.testing.assert_close(out, f, atol=1e-12, rtol=0)
+    back = rep.joints_to_features(tf.invert(real_joints))
+    torch.testing.assert_close(rep.transform_features(f, tf, inverse=True), back,
+                               atol=1e-12, rtol=0)  # fmt: skip

@@ -254,3 +254,24 @@ def test_toy_reaction_rule_is_learned() -> None:
     no_text = (context - w).square().mean()
     no_context = (offsets[cls] - w).square().mean()
     assert err < 0.2 * min(no_text, no_context), (float(err), float(no_text), float(no_context))
+
+
+def test_sampling_starts_the_reaction_at_the_context_plus_reaction_noise(monkeypatch) -> None:
+    """With the field held at zero the sampler returns its start: the context exactly for
+    reaction_noise 0 (the authors' path) and the context plus noise of std sigma in the
+    model's normalised latent space otherwise. A sampler that ignored the configured
+    reaction_noise would return the context for both."""
+    prev, mask, _ = sbatch()
+    text = make_text(3)
+    starts = {}
+    for sigma in (0.0, 0.5):
+        model = sflow(reaction_noise=sigma)
+        monkeypatch.setattr(model, "velocity", lambda x, t, **kw: torch.zeros_like(x))
+        w, _ = model.sample(prev, mask, text, guidance=None,
+                            generator=torch.Generator().manual_seed(0))  # fmt: skip
+        with torch.no_grad():
+            context = model.context(model.latent_norm.normalize(prev), mask)
+        starts[sigma] = model.latent_norm.normalize(w) - context
+    torch.testing.assert_close(starts[0.0], torch.zeros_like(starts[0.0]), atol=1e-5, rtol=0)
+    spread = float(starts[0.5].std())
+    assert 0.4 < spread < 0.6, spread  # 3 x 16 x 8 draws of N(0, 0.5^2)
