@@ -65,9 +65,10 @@ def _run(name: str) -> dict:
     z1, nfe1 = pflow.sample(text(2), text(2, length=1), generator=gen)
     w, nfe2 = sflow.sample(z1[:, None], torch.ones(2, 1, dtype=torch.bool), text(2),
                            text(2, length=1), generator=gen)  # fmt: skip
-    return {"cfg": cfg, "vae": vae, "vae_loss": float(losses["total"].detach()), "latent": (p, r),
-            "pflow_loss": float(pl["total"].detach()), "sflow": sl, "z1": z1, "w": w, "nfe": (nfe1, nfe2),
-            "params": sum(m.numel() for m in [*pflow.parameters(), *sflow.parameters()])}  # fmt: skip
+    params = sum(m.numel() for m in [*pflow.parameters(), *sflow.parameters()])
+    return {"cfg": cfg, "vae": vae, "vae_loss": float(losses["total"].detach()),
+            "latent": (p, r), "pflow_loss": float(pl["total"].detach()), "sflow": sl,
+            "z1": z1, "w": w, "nfe": (nfe1, nfe2), "params": params}  # fmt: skip
 
 
 @pytest.mark.parametrize("name", sorted(ABLATIONS))
