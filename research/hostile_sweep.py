@@ -1,6 +1,6 @@
 """Hostile input against every door of umf: the server, the CLI readers and `data prepare`.
 
-    python research/hostile_sweep.py [--out results/hardening-20261202] [--quick]
+    python research/hostile_sweep.py [--out results/hardening-20261202] [--quick] [--server-only]
 
 Builds hostile motion files (BVH that declare millions of frames, zip bombs, wrong units,
 NaN, truncated, junk ...) and hostile requests (cross-site posts, Host tricks, slow clients,
@@ -601,6 +601,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "hardening-20261202")
     ap.add_argument("--quick", action="store_true", help="smaller files, skip the long ones")
+    ap.add_argument("--server-only", action="store_true", help="the server's cases alone")
     args = ap.parse_args()
     with tempfile.TemporaryDirectory(prefix="umf-sweep-") as tmp:
         work = Path(tmp)
@@ -619,8 +620,11 @@ def main() -> None:
         finally:
             err = srv.stop()
         server_s = time.perf_counter() - t0
-        rows += cli_cases(paths, work, args.quick)
+        if not args.server_only:
+            rows += cli_cases(paths, work, args.quick)
     tracebacks = err.count("Traceback")
+    args.out.mkdir(parents=True, exist_ok=True)
+    (args.out / "server.log").write_text(err)  # what the server printed: its tracebacks too
     failed = [r for r in rows if not r["ok"]]
     summary = {
         "cases": len(rows),

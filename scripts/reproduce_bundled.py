@@ -4,8 +4,8 @@ The bundled model was made in steps across several sessions (a VAE and both flow
 GPU, then fine-tunes on a CPU; each step has a results page). This runs the same steps
 in order, with the options those pages and the shipped ``config.json`` record, into
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
-(the last stage, ``teach``, needs the full corpus of ``make corpus`` with ``../shared``:
-Bandai and the CMU and DeepMimic mocap):
+(the last two stages, ``teach`` and ``reteach``, need the full corpus of ``make corpus``
+with ``../shared``: Bandai and the CMU and DeepMimic mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -39,7 +39,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261202"
+NAME = "umf-small-bandai-20261202b"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -95,6 +95,14 @@ PFLOW_MIX = dict(**EXTEND, respell_captions=True, caption_mix=0.5, caption_mix_w
 TEACH = [*sets("train_vae", max_steps=600, real_repeats=60),
          *sets("train_pflow", max_steps=2000, real_repeats=60),
          *sets("train_sflow", max_steps=2000, real_repeats=60)]  # fmt: skip
+
+# results/umf-small-bandai-20261202b: taught again, every label weighted alike and the VAE
+# longer at twice the rate, so that it reconstructs flips and crawls (the release ran the VAE
+# on a 1,600-step schedule and kept its step-1000 checkpoint; this schedules 1,000)
+RETEACH = [*sets("train_vae", max_steps=1000, balance_labels=1.0, lr=0.0002, real_repeats=60,
+                 val_every=200),
+           *sets("train_pflow", max_steps=1600, real_repeats=60, balance_labels=1.0),
+           *sets("train_sflow", max_steps=1600, real_repeats=60)]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -167,7 +175,11 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(Stage("teach", [[*umf, "train", "finetune", "--from", str(m["mix"]), *c, "--out",
                                 str(teach), *TEACH, *cut("vae", "pflow", "sflow"),
                                 *(["--resume"] if teach.exists() else [])]], {}))  # fmt: skip
-    out.append(variant("name", teach / "model", work / "model", "--name", NAME))
+    reteach = work / "runs" / "reteach"
+    out.append(Stage("reteach", [[*umf, "train", "finetune", "--from", str(teach / "model"), *c,
+                                  "--out", str(reteach), *RETEACH, *cut("vae", "pflow", "sflow"),
+                                  *(["--resume"] if reteach.exists() else [])]], {}))  # fmt: skip
+    out.append(variant("name", reteach / "model", work / "model", "--name", NAME))
     return out
 
 

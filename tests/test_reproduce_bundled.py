@@ -28,7 +28,8 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     # each stage's model is the next one's --init (or source), so configs carry over; the
     # P-Flow fine-tune "hg" is not in the chain of configs: the decoder stage starts from the
     # S-Flow's model and takes hg's P-Flow as its export --base (as the release did)
-    chain = ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "dec", "mix", "teach"]
+    chain = ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "dec", "mix", "teach",
+             "reteach"]
     cfg = family_config("small")
     for name in chain:
         command = stages[name][0]
@@ -66,7 +67,11 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert teach[teach.index("--from") + 1] == str(models / "mix")
     run = tmp_path / "runs" / "teach"
     assert teach[teach.index("--out") + 1] == str(run)
-    assert stages["name"][0][2:4] == [str(run / "model"), str(tmp_path / "model")]
+    reteach = stages["reteach"][0]
+    assert reteach[reteach.index("--from") + 1] == str(run / "model")
+    again = tmp_path / "runs" / "reteach"
+    assert reteach[reteach.index("--out") + 1] == str(again)
+    assert stages["name"][0][2:4] == [str(again / "model"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
 
@@ -125,7 +130,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
-                     "mix", "teach", "name"]  # fmt: skip
+                     "mix", "teach", "reteach", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
