@@ -231,3 +231,32 @@ def test_a_slow_client_is_cut_off_and_too_many_connections_are_refused(tmp_path,
     finally:
         srv.shutdown()
         srv.server_close()
+
+
+def test_a_client_that_leaves_before_its_error_leaves_no_traceback(tmp_path, capfd, monkeypatch):
+    """Writing the one-line error to a client that has gone (a reset, a slow client cut at
+    the deadline) fails with a broken pipe: the server says nothing more and logs no
+    traceback for it, and keeps answering."""
+    import umf.serve.server as srv_mod
+
+    app = App(ModelHolder(_never), None, workdir=tmp_path)
+    srv = start_in_thread(app)
+    port = srv.server_address[1]
+    real_json = srv_mod.Handler._json
+    gone = {"n": 0}
+
+    def broken(self, *args, **kwargs):
+        if gone["n"] == 0:
+            gone["n"] += 1
+            raise BrokenPipeError(32, "Broken pipe")
+        return real_json(self, *args, **kwargs)
+
+    monkeypatch.setattr(srv_mod.Handler, "_json", broken)
+    try:
+        with pytest.raises(http.client.RemoteDisconnected):
+            ask(port, "GET", "/no/such/page")  # a 404 that cannot be written
+        assert ask(port, "GET", "/api/health")[0] == 200
+    finally:
+        srv.shutdown()
+        srv.server_close()
+    assert gone["n"] == 1 and "Traceback" not in capfd.readouterr().err

@@ -249,6 +249,12 @@ class Handler(BaseHTTPRequestHandler):
             pass
 
     def _dispatch(self, method: str) -> None:
+        try:
+            self._answer(method)
+        except (BrokenPipeError, ConnectionResetError, TimeoutError):
+            self.close_connection = True  # the client left before its answer: nothing to say
+
+    def _answer(self, method: str) -> None:
         self.session, self._new_session = read_session(self.headers.get("Cookie"))
         try:
             self._check_host()
