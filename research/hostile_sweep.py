@@ -623,6 +623,8 @@ def main() -> None:
         if not args.server_only:
             rows += cli_cases(paths, work, args.quick)
     tracebacks = err.count("Traceback")
+    for r in rows:  # the run's temporary folder is no one else's path
+        r["said"] = r["said"].replace(str(work), "$WORK")
     args.out.mkdir(parents=True, exist_ok=True)
     (args.out / "server.log").write_text(err)  # what the server printed: its tracebacks too
     failed = [r for r in rows if not r["ok"]]
@@ -641,7 +643,10 @@ def main() -> None:
         "# Hostile-input sweep",
         "",
         f"`python research/hostile_sweep.py` ({len(rows)} cases"
-        f"{', --quick' if args.quick else ''}).",
+        f"{', --quick' if args.quick else ''}), {time.strftime('%Y-%m-%d')}, on this machine. "
+        "A case passes when umf answers with one line (CLI: one `error:` line and exit 1/2, or a "
+        "clean success; server: a 2xx/4xx JSON line), never a traceback or a 5xx, and the "
+        "server still answers after it.",
         "",
         f"- passed: {summary['passed']} of {summary['cases']}",
         f"- server peak resident memory: {upload_peak} MB through the uploads, "
