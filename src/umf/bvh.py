@@ -51,7 +51,7 @@ _MOTION_RE = re.compile(r"^[ \t]*MOTION[ \t]*$", re.MULTILINE)
 _FRAMES_RE = re.compile(
     r"\s*Frames\s*:\s*(\S+)\s+Frame\s+Time\s*:\s*(\S+)[ \t]*(?:\n|$)", re.IGNORECASE
 )
-_ROW_FORMAT = "%.6f"
+_ROW_FORMAT = "%.7f"  # 0.1 micrometre: the files agree with the scene to well under 0.002 mm
 MAX_FRAMES = 1_000_000  # a bound on what a file may make the reader allocate
 MAX_JOINTS = 1_000
 
