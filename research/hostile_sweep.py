@@ -49,19 +49,11 @@ def _bvh_header(joints: int = 1, channels: bool = True) -> str:
     return "\n".join(out) + "\n"
 
 
-def _npz(joints, **extra) -> bytes:
+def _npz(joints, compressed: bool = False, **extra) -> bytes:
     import io
 
     buf = io.BytesIO()
-    np.savez(buf, joints=joints, **extra)
-    return buf.getvalue()
-
-
-def _npz_compressed(joints, **extra) -> bytes:
-    import io
-
-    buf = io.BytesIO()
-    np.savez_compressed(buf, joints=joints, **extra)
+    (np.savez_compressed if compressed else np.savez)(buf, joints=joints, **extra)
     return buf.getvalue()
 
 
@@ -76,6 +68,11 @@ def hostile_files(quick: bool) -> dict[str, bytes]:
     lines = motion.strip().splitlines()
     frames_line = next(i for i, ln in enumerate(lines) if ln.startswith("Frames"))
     body = "\n".join(lines[frames_line + 2 :])
+
+    def with_values(word: str) -> bytes:  # the motion with 40 of its numbers made ``word``
+        frames = "\n".join(lines[: frames_line + 2])
+        return (head + "MOTION\n" + frames + "\n" + body.replace("0.", word, 40)).encode()
+
     long = np.concatenate([real] * (18000 // real.shape[1] + 1), axis=1)[:, :18000]
     files: dict[str, bytes] = {
         "valid.bvh": good_bvh,
@@ -102,20 +99,8 @@ def hostile_files(quick: bool) -> dict[str, bytes]:
         ).encode(),
         "truncated.bvh": good_bvh[: len(good_bvh) // 2],
         "header-only.bvh": head.encode(),
-        "nan-values.bvh": (
-            head
-            + "MOTION\n"
-            + "\n".join(lines[: frames_line + 2])
-            + "\n"
-            + body.replace("0.", "nan", 40)
-        ).encode(),
-        "words-for-numbers.bvh": (
-            head
-            + "MOTION\n"
-            + "\n".join(lines[: frames_line + 2])
-            + "\n"
-            + body.replace("0.", "abc", 40)
-        ).encode(),
+        "nan-values.bvh": with_values("nan"),
+        "words-for-numbers.bvh": with_values("abc"),
         "frames-negative.bvh": (head + "MOTION\nFrames: -5\nFrame Time: 0.0333\n").encode(),
         "frames-words.bvh": (head + "MOTION\nFrames: many\nFrame Time: 0.0333\n").encode(),
         "frame-time-zero.bvh": (
@@ -138,7 +123,7 @@ def hostile_files(quick: bool) -> dict[str, bytes]:
             lambda m: "OFFSET " + " ".join(f"{float(v) * 100:g}" for v in m.groups()),
             text,
         ).encode(),
-        "zip-bomb.npz": _npz_compressed(np.zeros((8, 150_000, 22, 3), np.float32)),
+        "zip-bomb.npz": _npz(np.zeros((8, 150_000, 22, 3), np.float32), compressed=True),
         "2000-frames-at-1-fps.npz": _npz(np.repeat(real[:, :1], 2000, 1), fps=np.float32(1)),
         "588-s-at-3.4-fps.npz": _npz(np.repeat(real[:, :1], 2000, 1) + 0, fps=np.float32(3.4)),
         "in-centimetres.npz": _npz(real * 100),
@@ -161,7 +146,7 @@ def hostile_files(quick: bool) -> dict[str, bytes]:
         "fps-words.npz": _npz(real, fps=np.array("fast")),
         "fps-array.npz": _npz(real, fps=np.arange(3, dtype=np.float32)),
         "text-array.npz": _npz(real, text=np.arange(5)),
-        "no-joints.npz": _npz_compressed(np.zeros(3)).replace(b"joints", b"jjjjjj"),
+        "no-joints.npz": _npz(np.zeros(3), compressed=True).replace(b"joints", b"jjjjjj"),
         "not-a-zip.npz": b"PK\x03\x04" + b"\x00" * 500,
         "truncated.npz": _npz(real)[:2000],
         "a-bvh-named-npz.npz": good_bvh,

@@ -205,11 +205,12 @@ def draw(g: dict[str, set[str]], out: Path) -> None:
     ax.set_title("src/umf: every arrow an import, pointing at what is imported "
                  "(red: up a layer)", fontsize=10)  # fmt: skip
     fig.tight_layout()
-    tmp = out.with_name(f".{out.name}.tmp")
+    from umf.io import atomic_path
+
     kind = out.suffix.lstrip(".") or "svg"
-    fig.savefig(tmp, format=kind, metadata={"Date": None} if kind == "svg" else None)
+    with atomic_path(out) as tmp:
+        fig.savefig(tmp, format=kind, metadata={"Date": None} if kind == "svg" else None)
     plt.close(fig)
-    tmp.replace(out)
 
 
 def report(g: dict[str, set[str]]) -> list[str]:

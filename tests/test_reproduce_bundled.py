@@ -28,8 +28,18 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     # each stage's model is the next one's --init (or source), so configs carry over; the
     # P-Flow fine-tune "hg" is not in the chain of configs: the decoder stage starts from the
     # S-Flow's model and takes hg's P-Flow as its export --base (as the release did)
-    chain = ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "dec", "mix", "teach",
-             "reteach"]
+    chain = [
+        "gpu",
+        "sampling",
+        "rn0.5",
+        "rn0.5b",
+        "rn0.25c",
+        "rn0.125d",
+        "dec",
+        "mix",
+        "teach",
+        "reteach",
+    ]
     cfg = family_config("small")
     for name in chain:
         command = stages[name][0]
