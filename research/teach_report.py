@@ -10,7 +10,9 @@ positions, seeds 0..N-1, 4 s each (the targets of the "teach it" issue):
 - a cartwheel and a backflip turn the body over (head below the pelvis at some frame), a jump
   lifts the pelvis at least 15 cm above its median, a crawl keeps the pelvis below 0.6 m (90th
   percentile), getting up starts with the pelvis below 0.4 m and ends standing (head above
-  1.2 m over the last 10 frames).
+  1.2 m over the last 10 frames);
+- with ``--corpus``, the same checks on the VAE's reconstructions of the DeepMimic clips
+  (whether the VAE can hold an action at all, before any flow is asked for it).
 Prints a table and writes JSON (``--out``).
 """
 
@@ -65,6 +67,43 @@ def salsa_pass(c: dict) -> bool:
     return c["hands_near"] >= 0.5 and 0.25 <= c["pelvis"] <= 1.0 and c["facing"] > 0.5
 
 
+CLIPS = {
+    "backflip": "backflip",
+    "cartwheel": "cartwheel",
+    "crawl": "crawl",
+    "jump": "jump",
+    "getup_facedown": "getup",
+    "getup_faceup": "getup",
+}  # DeepMimic clip -> its check
+
+
+def reconstructed(pipe, corpus) -> list[dict]:
+    """The action checks on the VAE's reconstruction of each DeepMimic clip's first 4 s
+    (canonical frame), beside the real clip's value, and the pose error (root-relative,
+    mean over joints and frames): whether the VAE can hold the action at all."""
+    import torch
+
+    from umf.eval.reconstruction import reconstruct
+    from umf.representation import canonicalize_scene, joints_to_features
+
+    rows = []
+    for c in corpus.clips:
+        name = c.id.rsplit("humanoid3d_", 1)[-1]
+        if "deepmimic" not in c.id or "sie" in c.id or name not in CLIPS:
+            continue
+        canon, _ = canonicalize_scene(torch.from_numpy(c.joints[0][: 4 * 30 + 1][None]).float())
+        feats = joints_to_features(canon[0]).numpy()
+        rec = reconstruct(pipe.vae, pipe.normalizer, [feats])[0]
+        real, back = feats[:, :66].reshape(-1, 22, 3), rec[:, :66].reshape(-1, 22, 3)
+        _, v_real = action_check(CLIPS[name], real)
+        ok, v = action_check(CLIPS[name], back)
+        err = np.linalg.norm((back - back[:, :1]) - (real - real[:, :1]), axis=-1).mean()
+        rows.append({"clip": name, "kind": CLIPS[name], "real": round(v_real, 3),
+                     "vae": round(v, 3), "pass": ok,
+                     "pose_error_m": round(float(err), 3)})  # fmt: skip
+    return rows
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", type=Path, default=None)
@@ -104,11 +143,15 @@ def main() -> None:
             (scene,) = pipe(prompt, num_people=1, seconds=4.0, seed=s)
             ok, v = action_check(kind, np.asarray(scene.joints[0]))
             ok_raw, v_raw = action_check(kind, np.asarray(scene.raw_joints[0]))
+            end_head = float(scene.joints[0, -10:, 15, 1].mean())
             rows.append({"seed": s, "pass": ok, "value": round(v, 3), "raw_pass": ok_raw,
-                         "raw_value": round(v_raw, 3)})  # fmt: skip
+                         "raw_value": round(v_raw, 3), "end_head": round(end_head, 3)})  # fmt: skip
         report["actions"][kind] = {"prompt": prompt, "seeds": rows,
                                    "passed": sum(r["pass"] for r in rows),
                                    "raw_passed": sum(r["raw_pass"] for r in rows)}  # fmt: skip
+
+    if args.corpus is not None:  # what the VAE alone makes of the real clips (first 4 s)
+        report["reconstructed"] = reconstructed(pipe, corpus)
 
     def med(rows, k):
         return float(np.median([r[k] for r in rows]))
@@ -123,8 +166,16 @@ def main() -> None:
               f"{'':14s}{sum(r['pass'] for r in rows)}/{len(rows)}")  # fmt: skip
     for kind, r in report["actions"].items():
         vals = ", ".join(f"{x['value']:.2f}" for x in r["seeds"])
+        if kind == "getup":
+            vals += "; head over the last 10 frames " + ", ".join(
+                f"{x['end_head']:.2f}" for x in r["seeds"]
+            )
         print(f"{kind:10s} delivered {r['passed']}/{args.seeds}, raw {r['raw_passed']}/{args.seeds}"
               f"  ({vals})")  # fmt: skip
+    for row in report.get("reconstructed", []):
+        print(f"reconstructed {row['clip']:28s} {row['kind']:9s} real {row['real']:6.2f} "
+              f"VAE {row['vae']:6.2f} ({'pass' if row['pass'] else 'fail'}), pose error "
+              f"{row['pose_error_m'] * 100:.0f} cm")  # fmt: skip
     if args.out is not None:
         args.out.parent.mkdir(parents=True, exist_ok=True)
         args.out.write_text(json.dumps(report, indent=1) + "\n")
