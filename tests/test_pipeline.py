@@ -546,3 +546,39 @@ def test_prompts_are_respelled_into_the_captions_spelling(trained):
     assert np.array_equal(joints("a person walks backward"), joints("a person walks backwards"))
     pipe.config.text.respell = ()
     assert not np.allclose(joints("a person walks backward"), joints("a person walks backwards"))
+
+
+def test_reencoded_context_is_what_sflow_trained_on(trained, monkeypatch):
+    """With sflow.reencode_context, S-Flow's context is the encoder's posterior mean of the
+    people decoded so far, in person 1's re-centred first frame (as training crops are), and
+    people 2..N come back into the scene's frame: person 1 is unchanged, the others move."""
+    import torch
+
+    from umf.representation import canonicalize_features, leader_frame, transform_features
+
+    _, model, _ = trained
+    prompt = dict(prompts="two people walk", num_people=3, seconds=1.0, seed=0,
+                  fit=False, separate=False)  # fmt: skip
+    pipe = UMFPipeline.from_pretrained(model)
+    off = pipe(**prompt)[0]
+    pipe.config.sflow.reencode_context = True
+    contexts = []
+    sample = pipe.sflow.sample
+
+    def spy(prev, *a, **k):
+        contexts.append(prev.clone())
+        return sample(prev, *a, **k)
+
+    monkeypatch.setattr(pipe.sflow, "sample", spy)
+    on = pipe(**prompt)[0]
+    assert np.array_equal(on.joints[0], off.joints[0])
+    assert not np.allclose(on.joints[1:], off.joints[1:], atol=1e-3)
+    feats = torch.from_numpy(on.features)
+    tf = leader_frame(feats[0])
+    with torch.no_grad():
+        want1 = pipe._encode(canonicalize_features(feats[0])[None])
+        want2 = pipe._encode(transform_features(feats[1], tf)[None])
+    assert len(contexts) == 2 and contexts[1].shape[1] == 2
+    assert torch.allclose(contexts[0][:, 0], want1, atol=1e-4)
+    assert torch.allclose(contexts[1][:, 0], want1, atol=1e-4)
+    assert torch.allclose(contexts[1][:, 1], want2, atol=1e-4)

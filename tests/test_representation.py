@@ -68,6 +68,21 @@ def test_canonical_frame(real_joints):
     assert torch.allclose(tf.invert(canon), turned, atol=1e-9)
 
 
+def test_leader_frame_is_the_training_crops_frame(real_joints):
+    """A person moved by leader_frame lands where canonicalize_features puts person 1 of a
+    training crop (pelvis over the origin, facing +Z, heights kept), and back again."""
+    turned = real_joints @ yaw_matrix(torch.tensor(2.0, dtype=torch.float64)).T
+    f = rep.joints_to_features(turned + torch.tensor([3.0, 0.1, -1.0], dtype=torch.float64))
+    tf = rep.leader_frame(f)
+    placed = rep.transform_features(f, tf)
+    assert torch.allclose(placed, rep.canonicalize_features(f), atol=1e-9)
+    j0 = rep.features_to_joints(placed[0])
+    assert abs(float(j0[0, 0])) < 1e-9 and abs(float(j0[0, 2])) < 1e-9
+    assert abs(float(rep.heading_angle(j0))) < 1e-9
+    assert torch.allclose(rep.features_to_joints(placed)[..., 1], rep.features_to_joints(f)[..., 1])
+    assert torch.allclose(rep.transform_features(placed, tf, inverse=True), f, atol=1e-9)
+
+
 def test_scene_keeps_relative_placement(real_joints):
     other = real_joints + torch.tensor([1.5, 0.0, 0.0], dtype=torch.float64)
     scene = torch.stack([real_joints, other])

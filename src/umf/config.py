@@ -165,6 +165,11 @@ class SFlowConfig:
     # it starts at C, so person 2's randomness must come through the context half)
     reaction_noise: float = 0.0
     shared_backbone: bool = False  # share the P-Flow transformer (ablation)
+    # people already generated enter the context as the encoder's posterior mean of their
+    # decoded motion, person 1 re-centred on its first frame: what S-Flow trained on (the
+    # flows' own latents decode to a person 1 up to 0.7 m and 100 degrees off the canonical
+    # start, and a context that is not a posterior mean; False: the sampled latents as is)
+    reencode_context: bool = False
 
     def steps_for(self, num_people: int) -> int:
         """ODE steps per added person in a scene of ``num_people``."""

@@ -42,6 +42,7 @@ from umf.representation import (
     features_to_joints,
     fuse_positions,
     joints_to_rot6d,
+    leader_frame,
     transform_features,
 )
 from umf.scene import Scene
@@ -305,8 +306,16 @@ class UMFPipeline:
                 generator=gen,
             )
             latents, nfe = [z1], nfe + n
-        for _ in range(1, num_people):
-            prev = torch.stack(latents, dim=1)
+        reencode = self.config.sflow.reencode_context and num_people > 1
+        placed = None  # per scene, the frame people 2..N are generated in (re-encoding)
+        context = list(latents)
+        if reencode and actor is None:
+            lead = self.decode(z1, t)
+            placed = [leader_frame(f) for f in lead]
+            moved = [transform_features(f, tf) for f, tf in zip(lead, placed, strict=True)]
+            context = [self._encode(torch.stack(moved))]
+        for k in range(1, num_people):
+            prev = torch.stack(context, dim=1)
             mask = torch.ones(prev.shape[:2], dtype=torch.bool, device=self.device)
             w, n = self.sflow.sample(
                 prev,
@@ -319,6 +328,8 @@ class UMFPipeline:
             )
             latents.append(w)
             nfe += n
+            if k < num_people - 1:  # someone follows: w joins the context
+                context.append(self._encode(self.decode(w, t, reaction=True)) if reencode else w)
         z = torch.stack(latents, dim=1)  # (B, N, p, r)
         check_finite(z, "the sampled latents (P-Flow / S-Flow output)")
         raw = self._decode_raw(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
@@ -326,6 +337,9 @@ class UMFPipeline:
         feats = torch.cat([fuse_positions(raw[:, :1], *vae.fusion_weights()),
                            fuse_positions(raw[:, 1:], *vae.fusion_weights(reaction=True))],
                           dim=1)  # fmt: skip
+        if placed is not None:  # people 2..N back from person 1's re-centred frame
+            back = zip(feats[:, 1:], placed, strict=True)
+            feats[:, 1:] = torch.stack([transform_features(f, tf, inverse=True) for f, tf in back])
         if frame is not None:  # back into the user's frame; person 1 is their motion exactly
             feats = transform_features(feats.cpu(), frame, inverse=True)
             feats[:, 0] = assemble_features(torch.from_numpy(actor).float(), rot6d)
@@ -386,6 +400,12 @@ class UMFPipeline:
         joints = torch.from_numpy(np.ascontiguousarray(actor, dtype=np.float32))
         frame = canonical_transform(joints)
         return frame.apply(joints), frame
+
+    def _encode(self, features: torch.Tensor) -> torch.Tensor:
+        """Posterior means (B, p, r) of de-normalised features (B, T, 262)."""
+        x = self.normalizer.normalize(features).to(self.device)
+        mask = torch.ones(x.shape[:2], dtype=torch.bool, device=self.device)
+        return self.vae.encode(x, mask)[0]
 
     def _encode_actor(self, features: torch.Tensor, batch: int) -> torch.Tensor:
         """Latent (batch, p, r) of the canonical actor's features (T, 262): posterior mean."""

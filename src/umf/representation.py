@@ -333,6 +333,16 @@ def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) 
     )
 
 
+def leader_frame(features: Tensor) -> RigidTransform:
+    """The map (a turn about +Y and a shift on the floor, heights kept) that puts one
+    person's features (T, 262) where :func:`canonicalize_features` puts person 1 of a
+    training crop: first-frame pelvis over the origin, first-frame facing along +Z."""
+    joints0 = features_to_joints(features[0])
+    root = joints0[0]
+    return RigidTransform(yaw=-float(heading_angle(joints0)),
+                          origin=(float(root[0]), 0.0, float(root[2])))  # fmt: skip
+
+
 def canonicalize_features(features: Tensor) -> Tensor:
     """Express people (P, T, 262) (or one person (T, 262)) in person 1's frame at frame 0.
 
