@@ -1,0 +1,78 @@
+"""What S-Flow is handed as context: the flows' own latents or their re-encoding.
+
+    python research/context_reencode.py [--model DIR] [--seeds 8]
+
+For the model as it is and with ``sflow.reencode_context`` on, seeds 0..N-1, 4 s:
+- how far the decoded person 1 starts from the frame S-Flow trained in (the origin,
+  facing +Z): the offset (m) and the turn (degrees) of ``leader_frame``, for a salsa, a
+  kick and a walk prompt;
+- "Two people dance salsa together.": the teach report's closeness (research/teach_report.py)
+  on the decoded positions;
+- "Two people walk side by side.": person 2's delivered and decoded floor speed over the
+  leader's.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+import numpy as np
+import torch
+
+sys.path.insert(0, str(Path(__file__).parent))
+from teach_report import SALSA, closeness
+
+from umf.pipeline import UMFPipeline
+from umf.representation import leader_frame
+
+FRAME_PROMPTS = (SALSA, "One person kicks toward the other, who steps back.",
+                 "Two people walk side by side.")  # fmt: skip
+WALK = "Two people walk side by side."
+
+
+def speed(j: np.ndarray) -> float:
+    p = j[:, 0, [0, 2]]
+    return float(np.linalg.norm(p[-1] - p[0]) / ((len(p) - 1) / 30))
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--model", type=Path, default=None)
+    ap.add_argument("--seeds", type=int, default=8)
+    args = ap.parse_args()
+    pipe = UMFPipeline.from_pretrained(args.model)
+    seeds = range(args.seeds)
+    print(f"model {pipe.name}; {args.seeds} seeds, 4 s")
+    for prompt in FRAME_PROMPTS:
+        off, turn = [], []
+        for s in seeds:
+            (sc,) = pipe(prompt, num_people=2, seconds=4.0, seed=s)
+            tf = leader_frame(torch.from_numpy(np.asarray(sc.features[0])))
+            off.append(float(np.hypot(tf.origin[0], tf.origin[2])))
+            turn.append(abs(float(np.degrees(tf.yaw))))
+        span = f"{min(off):.2f}-{max(off):.2f} m, {min(turn):.0f}-{max(turn):.0f} degrees"
+        print(f"person 1's start off the training frame, {prompt!r}: {span}")
+    for flag in (False, True):
+        pipe.config.sflow.reencode_context = flag
+        rows = []
+        for s in seeds:
+            (sc,) = pipe(SALSA, num_people=2, seconds=4.0, seed=s)
+            c = closeness(np.asarray(sc.raw_joints))
+            rows.append((c["hands_near"], c["pelvis"], c["facing"]))
+        h, p, f = np.median(np.array(rows), axis=0)
+        pace = []
+        for s in seeds:
+            (sc,) = pipe(WALK, num_people=2, seconds=4.0, seed=s)
+            j, r = np.asarray(sc.joints), np.asarray(sc.raw_joints)
+            pace.append((speed(j[1]) / speed(j[0]), speed(r[1]) / speed(r[0])))
+        pace_a = np.array(pace)
+        print(f"reencode_context={flag}: salsa medians hands_near {h:.2f}, pelvis/stature "
+              f"{p:.2f}, facing {f:.2f}; walk, person 2 / leader speed delivered "
+              f"{np.median(pace_a[:, 0]):.2f} ({pace_a[:, 0].min():.2f}-{pace_a[:, 0].max():.2f}), "
+              f"decoded {np.median(pace_a[:, 1]):.2f}")  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
