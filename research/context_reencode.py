@@ -9,7 +9,8 @@ For the model as it is and with ``sflow.reencode_context`` on, seeds 0..N-1, 4 s
 - "Two people dance salsa together.": the teach report's closeness (research/teach_report.py)
   on the decoded positions;
 - "Two people walk side by side.": person 2's delivered and decoded floor speed over the
-  leader's.
+  leader's;
+- the same with re-encoding but person 1 left where it was decoded (not re-centred).
 """
 
 from __future__ import annotations
@@ -25,7 +26,7 @@ sys.path.insert(0, str(Path(__file__).parent))
 from teach_report import SALSA, closeness
 
 from umf.pipeline import UMFPipeline
-from umf.representation import leader_frame
+from umf.representation import RigidTransform, leader_frame
 
 FRAME_PROMPTS = (SALSA, "One person kicks toward the other, who steps back.",
                  "Two people walk side by side.")  # fmt: skip
@@ -54,8 +55,15 @@ def main() -> None:
             turn.append(abs(float(np.degrees(tf.yaw))))
         span = f"{min(off):.2f}-{max(off):.2f} m, {min(turn):.0f}-{max(turn):.0f} degrees"
         print(f"person 1's start off the training frame, {prompt!r}: {span}")
-    for flag in (False, True):
+    import umf.pipeline
+
+    centred = umf.pipeline.leader_frame
+    for flag, recentre in ((False, True), (True, True), (True, False)):
         pipe.config.sflow.reencode_context = flag
+        # re-encoding alone: person 1 left where it was decoded
+        umf.pipeline.leader_frame = (
+            centred if recentre else lambda f: RigidTransform(0.0, (0, 0, 0))
+        )
         rows = []
         for s in seeds:
             (sc,) = pipe(SALSA, num_people=2, seconds=4.0, seed=s)
@@ -68,7 +76,8 @@ def main() -> None:
             j, r = np.asarray(sc.joints), np.asarray(sc.raw_joints)
             pace.append((speed(j[1]) / speed(j[0]), speed(r[1]) / speed(r[0])))
         pace_a = np.array(pace)
-        print(f"reencode_context={flag}: salsa medians hands_near {h:.2f}, pelvis/stature "
+        name = f"reencode_context={flag}" + ("" if recentre else ", not re-centred")
+        print(f"{name}: salsa medians hands_near {h:.2f}, pelvis/stature "
               f"{p:.2f}, facing {f:.2f}; walk, person 2 / leader speed delivered "
               f"{np.median(pace_a[:, 0]):.2f} ({pace_a[:, 0].min():.2f}-{pace_a[:, 0].max():.2f}), "
               f"decoded {np.median(pace_a[:, 1]):.2f}")  # fmt: skip
