@@ -106,3 +106,28 @@ def test_restating_the_body_statistics_keeps_the_vae_function(one_thread):
     assert torch.allclose(mu2, mu, atol=1e-4)
     assert torch.allclose(vae.decode(mu2, mask), out, atol=1e-3 * float(out.abs().max()))
     assert torch.equal(vae.body_std, new.std) and torch.equal(vae.body_mean, new.mean)
+
+
+def test_a_stage_left_out_keeps_its_weights_and_its_training_options(
+    tmp_path, library_corpus, monkeypatch, one_thread
+):
+    """`--stages pflow`: the VAE and S-Flow come from the model as they were, and so do
+    their training options in the exported config (the fine-tune defaults are the P-Flow's
+    only: a model card reading them must see how those stages were trained)."""
+    import json
+
+    import umf.text
+    from umf.checkpoint import read_weights
+    from umf.train.run import Launch, finetune
+
+    monkeypatch.setattr(umf.text, "build_text_encoder", lambda *a, **k: FakeText())
+    source = save_tiny_model(tmp_path / "source", seed=3)
+    steps = [o for o in STEPS if o.startswith("train_pflow.")]
+    model = finetune(source, library_corpus, tmp_path / "run", steps, Launch(progress=False),
+                     stages=("pflow",), log=lambda m: None)  # fmt: skip
+    for stage in ("vae", "sflow"):
+        before, after = read_weights(source, stage), read_weights(model, stage)
+        assert all(torch.equal(before[k].to(after[k].dtype), after[k]) for k in before), stage
+    was, now = (json.loads((m / "config.json").read_text()) for m in (source, model))
+    assert now["train_vae"] == was["train_vae"] and now["train_sflow"] == was["train_sflow"]
+    assert now["train_pflow"]["lr"] == 0.0001 and now["train_pflow"]["max_steps"] == 2

@@ -508,8 +508,11 @@ def finetune(
     if "vae" not in stages and (set(stages) & {"pflow", "sflow"}):
         log("the VAE is not fine-tuned: the flows train on the model's own latents")
     fresh = not (run_dir / "config.yaml").exists()
+    # the fine-tune defaults of the stages trained here only: a stage taken from the model
+    # keeps the training options it was trained with in the exported config
+    defaults = [o for o in FINETUNE if o.split(".", 1)[0].removeprefix("train_") in stages]
     cfg = resolve_config(run_dir, None, model / "config.json" if fresh else None,
-                         [*FINETUNE, *overrides] if fresh else list(overrides))  # fmt: skip
+                         [*defaults, *overrides] if fresh else list(overrides))  # fmt: skip
     own_vae = "vae" in stages
     for stage in STAGES:
         if stage not in stages:
