@@ -10,7 +10,9 @@ For the model as it is and with ``sflow.reencode_context`` on, seeds 0..N-1, 4 s
   on the decoded positions;
 - "Two people walk side by side.": person 2's delivered and decoded floor speed over the
   leader's;
-- the same with re-encoding but person 1 left where it was decoded (not re-centred).
+- the same with re-encoding but person 1 left where it was decoded (not re-centred);
+- with ``--corpus``, each real salsa take's leader (its first 4 s) as person 1 of a
+  reaction (``umf react``), seeds 0-1: where the S-Flow puts the follower around a real one.
 """
 
 from __future__ import annotations
@@ -42,6 +44,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", type=Path, default=None)
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--corpus", type=Path, default=None, help="the salsa takes for reactions")
     args = ap.parse_args()
     pipe = UMFPipeline.from_pretrained(args.model)
     seeds = range(args.seeds)
@@ -81,6 +84,21 @@ def main() -> None:
               f"{p:.2f}, facing {f:.2f}; walk, person 2 / leader speed delivered "
               f"{np.median(pace_a[:, 0]):.2f} ({pace_a[:, 0].min():.2f}-{pace_a[:, 0].max():.2f}), "
               f"decoded {np.median(pace_a[:, 1]):.2f}")  # fmt: skip
+    umf.pipeline.leader_frame = centred
+    pipe.config.sflow.reencode_context = False
+    if args.corpus is not None:
+        from umf.data.corpus import Corpus
+
+        apart = []
+        for c in Corpus.load(args.corpus).clips:
+            if c.meta.get("content") == "salsa":
+                for s in range(2):
+                    (sc,) = pipe(SALSA, num_people=2, seed=s, actor=c.joints[0, : 4 * 30 + 1])
+                    apart.append(closeness(np.asarray(sc.raw_joints))["pelvis"])
+        print(
+            f"reactions to {len(apart) // 2} real salsa leaders, seeds 0-1: pelvises "
+            f"{min(apart):.2f}-{max(apart):.2f} statures apart (median {np.median(apart):.2f})"
+        )
 
 
 if __name__ == "__main__":

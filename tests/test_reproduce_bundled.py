@@ -39,15 +39,20 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "mix",
         "teach",
         "reteach",
+        "rebalance",
     ]
     cfg = family_config("small")
     for name in chain:
         command = stages[name][0]
-        if "finetune" in command:  # umf train finetune applies its defaults first
+        if "finetune" in command:  # umf train finetune applies its stages' defaults first
             from umf.train.run import FINETUNE
 
+            trained = ["vae", "pflow", "sflow"]
+            if "--stages" in command:
+                trained = command[command.index("--stages") + 1].split(",")
             for o in FINETUNE:
-                cfg = set_option(cfg, o)
+                if o.split(".")[0].removeprefix("train_") in trained:
+                    cfg = set_option(cfg, o)
         for i, arg in enumerate(command):
             if arg == "--set":
                 cfg = set_option(cfg, command[i + 1])
@@ -81,7 +86,12 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert reteach[reteach.index("--from") + 1] == str(run / "model")
     again = tmp_path / "runs" / "reteach"
     assert reteach[reteach.index("--out") + 1] == str(again)
-    assert stages["name"][0][2:4] == [str(again / "model"), str(tmp_path / "model")]
+    rebalance = stages["rebalance"][0]
+    assert rebalance[rebalance.index("--from") + 1] == str(again / "model")
+    assert rebalance[rebalance.index("--stages") + 1] == "pflow"
+    last = tmp_path / "runs" / "rebalance"
+    assert rebalance[rebalance.index("--out") + 1] == str(last)
+    assert stages["name"][0][2:4] == [str(last / "model"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
 
@@ -140,7 +150,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
-                     "mix", "teach", "reteach", "name"]  # fmt: skip
+                     "mix", "teach", "reteach", "rebalance", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
