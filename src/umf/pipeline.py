@@ -45,8 +45,9 @@ from umf.representation import (
     leader_frame,
     transform_features,
 )
+from umf.reroll import reroll_person
 from umf.scene import Scene
-from umf.separation import separate_people
+from umf.separation import separate_people, touching_distances
 from umf.streams import fresh_seed, scene_generators
 from umf.text import respell_prompt
 from umf.validation import (
@@ -372,6 +373,24 @@ class UMFPipeline:
                                 bodies, fit=False))  # fmt: skip
         return scenes
 
+    def reroll(
+        self,
+        scene: Scene,
+        person: int,
+        seed: int = 0,
+        prompt: str | None = None,
+        guidance: float | None = None,
+        sflow_steps: int | None = None,
+        anchor: bool = True,
+        separate: bool = True,
+    ) -> Scene:
+        """A new Scene: person ``person`` (1-based, as in the files' ``-p1``, ``-p2`` ...)
+        sampled again from ``seed`` as S-Flow's reaction to everybody else, whose joints,
+        bodies and features are copied bit for bit (:mod:`umf.reroll`; person 1 too is
+        re-rolled as a reaction to the others). ``prompt``: the scene's own by default."""
+        return reroll_person(self, scene, person, seed, prompt, guidance, sflow_steps, anchor,
+                             separate)  # fmt: skip
+
     def decode(self, z: torch.Tensor, num_frames: int, reaction: bool = False) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262). ``reaction``: people
         2..N (the S-Flow's), whose floor path may trust its decoded positions more
@@ -451,20 +470,6 @@ def clean_up(
     if not fit:
         return shifts, None
     return shifts, fit_bodies(start + shifts[:, None, None, :], contacts, floor, clean)
-
-
-def touching_distances(contact: dict | None) -> dict[str, float]:
-    """:func:`umf.separation.separate_people`'s distances: its defaults, or for a prompt
-    worded like a touching take, that take's closeness (never closer than
-    :data:`umf.separation.TOUCH_FLOOR` between joints: bodies still must not pass
-    through each other)."""
-    from umf.separation import CONTACT_DISTANCE, FIT_MARGIN, MIN_DISTANCE, TOUCH_FLOOR
-
-    if not contact:
-        return {}
-    closest = max(float(contact.get("closest_m", CONTACT_DISTANCE)), TOUCH_FLOOR)
-    return {"min_distance": min(MIN_DISTANCE, float(contact.get("pelvis_m", MIN_DISTANCE))),
-            "contact_distance": min(CONTACT_DISTANCE, closest) + FIT_MARGIN}  # fmt: skip
 
 
 def delivered_joints(

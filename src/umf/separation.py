@@ -10,7 +10,7 @@ composer keeps people 25 cm apart), so hands and elbows do not pass through a ne
 Person 1 never moves (in ``react`` mode it is the user's own motion), and each person's
 motion is unchanged up to that one translation. People the data holds close (a prompt worded
 like the caption of a real take whose partners touch, such as CMU's salsa couples) keep the
-closeness of that take instead (:func:`umf.pipeline.touching_distances`). Evaluation turns it off
+closeness of that take instead (:func:`touching_distances`). Evaluation turns it off
 (``separate=False``) to score the model's own output.
 """
 
@@ -133,3 +133,15 @@ def separate_people(
     shifts = np.zeros((joints.shape[0], 3), dtype=joints.dtype)
     shifts[:, 0], shifts[:, 2] = flat[:, 0], flat[:, 1]
     return joints + shifts[:, None, None, :], shifts
+
+
+def touching_distances(contact: dict | None) -> dict[str, float]:
+    """:func:`separate_people`'s distances: its defaults, or for a prompt
+    worded like a touching take, that take's closeness (never closer than
+    :data:`TOUCH_FLOOR` between joints: bodies still must not pass
+    through each other)."""
+    if not contact:
+        return {}
+    closest = max(float(contact.get("closest_m", CONTACT_DISTANCE)), TOUCH_FLOOR)
+    return {"min_distance": min(MIN_DISTANCE, float(contact.get("pelvis_m", MIN_DISTANCE))),
+            "contact_distance": min(CONTACT_DISTANCE, closest) + FIT_MARGIN}  # fmt: skip

@@ -211,3 +211,59 @@ def react(
         for j, scene in zip(part, scenes, strict=True):
             for path in write_scene(scene, stems[j], wanted):
                 typer.echo(f"wrote {path}")
+
+
+def reroll(
+    scene_file: Path = typer.Argument(..., help="A umf .npz scene of two or more people."),
+    person: int = typer.Option(..., "--person", "-p", help="Who to re-roll (1 = the -p1 files)."),
+    seed: int = typer.Option(0, help="Random seed for the new person (0 to 2^64-1)."),
+    prompt: str | None = typer.Option(None, help="What happens (default: the scene's prompt)."),
+    guidance: float | None = typer.Option(None, help="CFG scale, 0-20 (model default)."),
+    sflow_steps: int | None = typer.Option(None, help=SFLOW_STEPS_HELP),
+    formats: str = typer.Option("npz,gif", "--format", help=f"Any of {','.join(FORMATS)}."),
+    out: Path = typer.Option(Path("out/reroll"), help="Output directory."),
+    anchor: bool = typer.Option(
+        True,
+        help="Move a gliding body back so planted feet stay put (--no-anchor: the decoded path).",
+    ),
+    model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
+) -> None:
+    """Generate one person of a scene again; everyone else stays exactly as they were."""
+    from umf.data.motion_file import FPS, npz_bodies, open_motion
+    from umf.scene import Scene
+
+    wanted = parse_formats(formats)
+    check_int("--person", person, 1, 1 << 20)
+    check_int("--seed", seed, 0, (1 << 64) - 1)
+    if guidance is not None:
+        check_float("--guidance", guidance, 0.0, 20.0)
+    if sflow_steps is not None:
+        check_int("--sflow-steps", sflow_steps, 1, 200)
+    if prompt is not None:
+        check_request(prompt, 2)
+    check_out_dir(out)
+    motion = open_motion(scene_file)
+    if not 1 <= person <= motion.num_people:
+        raise UMFError(f"{scene_file}: has {motion.num_people} people, no person {person}")
+    text = prompt if prompt is not None else motion.text
+    if not text.strip():
+        raise UMFError(f"{scene_file}: has no prompt; give one with --prompt")
+    stem = out / f"reroll-p{person}-{_slug(text)}"
+    check_targets(scene_targets(stem, wanted, motion.num_people))
+    # a 30 fps file is used as it is, with its bodies: the others stay the file's, bit for bit
+    exact = motion.fps == FPS and "converted_from" not in motion.meta
+    joints = motion.joints if exact else motion.scene().joints
+    bodies = npz_bodies(scene_file, *joints.shape[:2]) if exact else None
+    scene = Scene(joints, None, motion.text, FPS, meta=dict(motion.meta), bodies=bodies,
+                  fit=bodies is None)  # fmt: skip
+    config = peek_config(model)
+    if config is not None and scene.num_frames > config.vae.max_frames + 1:
+        raise UMFError(f"{scene_file}: {scene.num_frames} frames; the model re-rolls scenes of "
+                       f"at most {config.vae.max_frames + 1}")  # fmt: skip
+    pipe = load_pipeline(model)
+    warn_unknown(pipe, [text])
+    new = pipe.reroll(scene, person, seed=seed, prompt=prompt, guidance=guidance,
+                      sflow_steps=sflow_steps, anchor=anchor)  # fmt: skip
+    clean_stale(out)
+    for path in write_scene(new, stem, wanted):
+        typer.echo(f"wrote {path}")

@@ -8,7 +8,7 @@ import typer
 
 from umf.cli.data import app as data_app
 from umf.cli.eval import evaluate
-from umf.cli.generate import generate, react
+from umf.cli.generate import generate, react, reroll
 from umf.cli.info import info
 from umf.cli.serve import serve, view
 from umf.cli.train import app as train_app
@@ -31,6 +31,7 @@ app.add_typer(data_app, name="data")
 app.add_typer(train_app, name="train")
 app.command("generate")(generate)
 app.command("react")(react)
+app.command("reroll")(reroll)
 app.command("eval")(evaluate)
 app.command("serve")(serve)
 app.command("view")(view)

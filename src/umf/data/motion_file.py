@@ -127,6 +127,26 @@ def open_motion(path: str | Path) -> MotionFile:
     return MotionFile(np.ascontiguousarray(joints, dtype=np.float32), text, fps, meta)
 
 
+def npz_bodies(path: str | Path, people: int, frames: int):
+    """The rigid bodies a umf .npz scene file holds (``offsets``, ``rotations``, ``root``),
+    or None when it has none or they do not fit ``people`` x ``frames``."""
+    from umf.kinematics import Bodies
+
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if not {"offsets", "rotations", "root"} <= set(z.files):
+                return None
+            parts = [np.asarray(z[k], dtype=np.float64) for k in ("offsets", "rotations", "root")]
+        bodies = Bodies(*parts)
+    except (ValueError, OSError, KeyError):
+        return None
+    if (bodies.num_people, bodies.num_frames) != (people, frames):
+        return None
+    if not all(np.isfinite(a).all() for a in parts):
+        return None
+    return bodies
+
+
 def load_motion(path: str | Path) -> Scene:
     """Every person in ``path`` (.npz or .bvh) as a scene in metres at 30 fps
     (:func:`open_motion`, then all of it resampled)."""
