@@ -33,6 +33,8 @@ EXAMPLES = [
     ("crawl", "A person crawls on hands and knees.", 1, 4.0),
 ]
 FRAMES = 5  # evenly spaced frames per strip
+# (file name, the example re-rolled, its person, the re-roll's seed): `umf reroll`
+REROLLS = [("group_line_reroll_p2", "group_line", 2, 7)]
 # (file name, example it shows again, frames): close strips seen from the front
 CLOSE = [("wave_front", "wave", list(range(12, 55, 6)))]
 
@@ -58,6 +60,13 @@ def main() -> None:
         path = save_still(scene.joints, args.out / f"{name}.png", frames, caption=prompt)
         print(f'{path}: umf generate "{prompt}" --people {people} --seconds {seconds:g} '
               f"--seed {args.seed} --format gif")  # fmt: skip
+    for name, shown, person, seed in REROLLS:
+        scene = pipe.reroll(scenes[shown], person, seed=seed)
+        t = scene.num_frames
+        frames = [round(i * (t - 1) / (FRAMES - 1)) for i in range(FRAMES)]
+        caption = f"{scene.text} (person {person} re-rolled, seed {seed})"
+        path = save_still(scene.joints, args.out / f"{name}.png", frames, caption=caption)
+        print(f"{path}: umf reroll <{shown}.npz> --person {person} --seed {seed} --format gif")
     for name, shown, frames in CLOSE:
         person = scenes[shown].joints[0]
         fx, fz = start_facing(person)  # the camera stands where the person looks

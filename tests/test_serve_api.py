@@ -259,6 +259,38 @@ def test_bad_requests_and_limits(server):
         assert status == want and needle in body["error"], (want, body)
 
 
+def test_reroll_makes_a_new_scene_with_the_others_as_they_were(server, scene):
+    """POST /api/reroll: a new scene in the history whose other people are the stored
+    scene's bit for bit (its NPZ), person 2 new; bad fields are one-line 4xx answers."""
+    base, _ = server
+    status, again = as_json(request(base, "/api/reroll",
+                                    {"scene": scene["id"], "person": 2, "seed": 11}))  # fmt: skip
+    assert status == 200, again
+    assert again["id"] != scene["id"] and again["rerolled_from"] == scene["id"]
+    assert again["reroll"] == {"person": 2, "seed": 11} and again["seed"] == scene["seed"]
+    files = []
+    for s in (scene, again):
+        with np.load(io.BytesIO(request(base, s["files"]["npz"])[2])) as z:
+            files.append({k: z[k] for k in ("joints", "rotations", "root")})
+    for key in ("joints", "rotations", "root"):
+        assert np.array_equal(files[0][key][[0, 2]], files[1][key][[0, 2]]), key
+    assert not np.allclose(files[0]["joints"][1], files[1]["joints"][1])
+    status, listed = as_json(request(base, "/api/scenes"))
+    assert again["id"] in [s["id"] for s in listed["scenes"]]
+    for body, code, needle in (
+        ({"scene": scene["id"], "person": 4}, 400, "has 3 people, no person 4"),
+        ({"scene": scene["id"]}, 400, "'person' is required"),
+        ({"scene": scene["id"], "person": 1, "seed": -1}, 400, "'seed' must be between"),
+        ({"scene": "s999", "person": 1}, 404, "no scene 's999'"),
+        ({"scene": scene["id"], "person": 1, "extra": 1}, 400, "unknown field 'extra'"),
+        ([1, 2], 400, "JSON object"),
+    ):
+        status, answer = as_json(request(base, "/api/reroll", body))
+        assert status == code and needle in answer["error"], (body, answer)
+        assert "\n" not in answer["error"]
+    assert request(base, "/api/reroll")[0] == 405
+
+
 def test_missing_content_length_is_411(server):
     import http.client
 

@@ -119,3 +119,15 @@ def test_the_glb_download_is_a_valid_glb(browsed):
     assert kind == b"JSON" and len(doc["skins"]) == 3 and doc["animations"][0]["name"] == "umf"
     assert doc["asset"]["extras"]["text"] == "Three people walk side by side."
     assert result["download_name"].endswith(".glb")
+
+
+def test_rerolling_person_2_keeps_the_others(browsed):
+    """The page's re-roll button of person 2: a new scene in the history, persons 1 and 3
+    the same joints as before (the API's mm-rounded copy), person 2 new."""
+    _, result = browsed
+    assert result["errors"] == [], result["errors"]
+    assert result["reroll_buttons"] == ["P1", "P2", "P3"]
+    r = result["reroll"]
+    assert r["from"] != r["to"] and r["same"] == [True, False, True], r
+    assert "Person 2 re-rolled" in r["status"]
+    assert "P2 re-rolled" in r["history"][0] and len(r["history"]) == len(result["history"]) + 1

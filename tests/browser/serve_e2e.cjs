@@ -1,6 +1,6 @@
 // Drives the `umf serve` page in headless Debian Chromium with playwright-core, as a user
-// would: prompt, 3 people, Generate, wait for the scene, scrub, download the GLB. Writes
-// what it saw under OUT (PNG snapshots, the GLB, result.json); tests/test_serve_browser.py
+// would: prompt, 3 people, Generate, wait for the scene, scrub, download the GLB, re-roll
+// person 2. Writes what it saw under OUT (PNG snapshots, the GLB, result.json); tests/test_serve_browser.py
 // checks the pixels and files. Usage: node serve_e2e.cjs URL OUT
 const fs = require("fs");
 const os = require("os");
@@ -69,6 +69,21 @@ async function main() {
     const [download] = await Promise.all([page.waitForEvent("download"), page.click("#dl-glb")]);
     await download.saveAs(path.join(out, "download.glb"));
     result.download_name = download.suggestedFilename();
+
+    // re-roll person 2: a new scene is shown, persons 1 and 3 as they were
+    const first = await page.evaluate(() => document.body.dataset.scene);
+    result.reroll_buttons = await page.$$eval("#reroll-buttons button", (els) => els.map((e) => e.textContent));
+    await page.click("#reroll-p2");
+    await page.waitForFunction((id) => document.body.dataset.scene !== id, first, { timeout: 600000 });
+    const second = await page.evaluate(() => document.body.dataset.scene);
+    result.reroll = await page.evaluate(async ([a, b]) => {
+      const get = async (id) => (await (await fetch(`/api/scenes/${id}`)).json()).joints;
+      const [ja, jb] = [await get(a), await get(b)];
+      const same = (k) => JSON.stringify(ja[k]) === JSON.stringify(jb[k]);
+      return { from: a, to: b, same: [same(0), same(1), same(2)] };
+    }, [first, second]);
+    result.reroll.status = await page.textContent("#status-text");
+    result.reroll.history = await page.$$eval("#history li", (els) => els.map((e) => e.textContent));
   } finally {
     fs.writeFileSync(path.join(out, "result.json"), JSON.stringify(result, null, 2));
     await context.close();

@@ -229,8 +229,7 @@ def reroll(
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
 ) -> None:
     """Generate one person of a scene again; everyone else stays exactly as they were."""
-    from umf.data.motion_file import FPS, npz_bodies, open_motion
-    from umf.scene import Scene
+    from umf.data.motion_file import open_scene
 
     wanted = parse_formats(formats)
     check_int("--person", person, 1, 1 << 20)
@@ -242,20 +241,14 @@ def reroll(
     if prompt is not None:
         check_request(prompt, 2)
     check_out_dir(out)
-    motion = open_motion(scene_file)
-    if not 1 <= person <= motion.num_people:
-        raise UMFError(f"{scene_file}: has {motion.num_people} people, no person {person}")
-    text = prompt if prompt is not None else motion.text
+    scene = open_scene(scene_file)  # a 30 fps umf file as it is: the others stay bit for bit
+    if not 1 <= person <= scene.num_people:
+        raise UMFError(f"{scene_file}: has {scene.num_people} people, no person {person}")
+    text = prompt if prompt is not None else scene.text
     if not text.strip():
         raise UMFError(f"{scene_file}: has no prompt; give one with --prompt")
     stem = out / f"reroll-p{person}-{_slug(text)}"
-    check_targets(scene_targets(stem, wanted, motion.num_people))
-    # a 30 fps file is used as it is, with its bodies: the others stay the file's, bit for bit
-    exact = motion.fps == FPS and "converted_from" not in motion.meta
-    joints = motion.joints if exact else motion.scene().joints
-    bodies = npz_bodies(scene_file, *joints.shape[:2]) if exact else None
-    scene = Scene(joints, None, motion.text, FPS, meta=dict(motion.meta), bodies=bodies,
-                  fit=bodies is None)  # fmt: skip
+    check_targets(scene_targets(stem, wanted, scene.num_people))
     config = peek_config(model)
     if config is not None and scene.num_frames > config.vae.max_frames + 1:
         raise UMFError(f"{scene_file}: {scene.num_frames} frames; the model re-rolls scenes of "

@@ -147,6 +147,18 @@ def npz_bodies(path: str | Path, people: int, frames: int):
     return bodies
 
 
+def open_scene(path: str | Path) -> Scene:
+    """A scene file as it is, for re-rolling one of its people: a 30 fps umf ``.npz`` keeps
+    its joints and its bodies bit for bit; anything else is resampled and fitted once
+    (:func:`load_motion`)."""
+    motion = open_motion(path)
+    if motion.fps != FPS or "converted_from" in motion.meta:
+        return motion.scene()
+    bodies = npz_bodies(path, motion.num_people, motion.joints.shape[1])
+    return Scene(motion.joints, None, motion.text, FPS, meta=dict(motion.meta), bodies=bodies,
+                 fit=bodies is None)  # fmt: skip
+
+
 def load_motion(path: str | Path) -> Scene:
     """Every person in ``path`` (.npz or .bvh) as a scene in metres at 30 fps
     (:func:`open_motion`, then all of it resampled)."""

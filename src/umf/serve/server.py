@@ -7,6 +7,7 @@ the model is loaded once in a background thread. Routes:
 - ``GET /`` the page; ``GET /static/*`` its files; ``GET /vendor/three/*`` three.js;
 - ``GET /api/health``; ``POST /api/generate`` (JSON, the CLI's fields); ``GET /api/scenes``
   and ``GET /api/scenes/ID``; ``POST /api/upload?name=F.bvh`` (react mode's actor);
+  ``POST /api/reroll`` (``{"scene", "person", "seed"}``: one person of a scene again);
   ``POST``/``GET /api/scenes/ID/mp4`` (encode the MP4 in the background / its progress);
 - ``GET /files/ID/NAME`` a scene's GLB, NPZ, BVH zip or MP4.
 
@@ -36,7 +37,13 @@ import numpy as np
 
 from umf.errors import UMFError
 from umf.serve.scenes import BUSY_WAIT_S, ActorStore, ModelHolder, SceneRecord, SceneStore
-from umf.serve.validate import GenerateRequest, RequestError, parse_generate
+from umf.serve.validate import (
+    GenerateRequest,
+    RequestError,
+    RerollRequest,
+    parse_generate,
+    parse_reroll,
+)
 from umf.version import __version__
 
 THREE_VERSION = "0.187.0"
@@ -122,6 +129,37 @@ class App:
                   "generate_seconds": round(time.perf_counter() - begin, 3)}  # fmt: skip
         record = self.scenes.add_scene(scene, params, session)
         return scene_json(record, req.joints)
+
+    def reroll(self, req: RerollRequest, session: str | None = None) -> dict[str, Any]:
+        """A new scene: person ``req.person`` of a stored scene generated again, everyone
+        else as they were (``UMFPipeline.reroll``), from the scene's own NPZ."""
+        from umf.data.motion_file import open_scene
+
+        record = self.scenes.get(req.scene, session)
+        if "npz" not in record.files:
+            raise RequestError(f"scene {req.scene!r} holds no motion to re-roll")
+        if not 1 <= req.person <= record.people:
+            raise RequestError(f"scene {req.scene!r} has {record.people} people, "
+                               f"no person {req.person}")  # fmt: skip
+        pipe = self.model.get()
+        try:
+            scene = open_scene(record.folder / record.files["npz"])
+        except UMFError as exc:
+            raise RequestError(str(exc)) from None
+        if not self.model.generating.acquire(timeout=BUSY_WAIT_S):
+            raise RequestError("the server is busy with another scene; try again", 503)
+        begin = time.perf_counter()
+        try:
+            new = pipe.reroll(scene, req.person, seed=req.seed)
+        except UMFError as exc:
+            raise RequestError(str(exc)) from None
+        finally:
+            self.model.generating.release()
+        params = {**record.params, "rerolled_from": record.id,
+                  "reroll": {"person": req.person, "seed": req.seed},
+                  "generate_seconds": round(time.perf_counter() - begin, 3)}  # fmt: skip
+        params.pop("coverage", None)
+        return scene_json(self.scenes.add_scene(new, params, session), req.joints)
 
     def _actor_window(self, req: GenerateRequest, pipe: Any, session: str | None) -> np.ndarray:
         """Person ``actor_person`` of the upload, from ``start`` for ``seconds`` (capped at
@@ -287,6 +325,7 @@ class Handler(BaseHTTPRequestHandler):
         posts: dict[tuple[str, ...], Callable[[], None]] = {
             ("api", "generate"): self._post_generate,
             ("api", "upload"): self._post_upload,
+            ("api", "reroll"): self._post_reroll,
         }
         table = gets if method == "GET" else posts if method == "POST" else {}
         if tuple(parts) in table:
@@ -374,6 +413,9 @@ class Handler(BaseHTTPRequestHandler):
     def _post_generate(self) -> None:
         request = parse_generate(self._json_body())
         self._json(self.app.generate(request, self.session))
+
+    def _post_reroll(self) -> None:
+        self._json(self.app.reroll(parse_reroll(self._json_body()), self.session))
 
     def _post_upload(self) -> None:
         query = parse_qs(urlsplit(self.path).query)

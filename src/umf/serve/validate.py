@@ -138,3 +138,36 @@ def parse_generate(body: Any) -> GenerateRequest:
         start=_float(body, "start", 0.0, 0.0, MAX_START),
         joints=joints,
     )
+
+
+REROLL_FIELDS = {"scene", "person", "seed", "joints"}
+
+
+@dataclass(frozen=True)
+class RerollRequest:
+    """One person of a stored scene to generate again (``POST /api/reroll``)."""
+
+    scene: str
+    person: int
+    seed: int = 0
+    joints: bool = True
+
+
+def parse_reroll(body: Any) -> RerollRequest:
+    """A checked :class:`RerollRequest` from a decoded JSON body, or a RequestError."""
+    if not isinstance(body, dict):
+        raise RequestError("the request body must be a JSON object")
+    unknown = sorted(set(body) - REROLL_FIELDS)
+    if unknown:
+        raise RequestError(f"unknown field {unknown[0]!r}; fields: "
+                           f"{', '.join(sorted(REROLL_FIELDS))}")  # fmt: skip
+    scene = body.get("scene")
+    if not isinstance(scene, str) or not 0 < len(scene) <= 64:
+        raise RequestError("'scene' must be the id of a scene (GET /api/scenes)")
+    person = _int(body, "person", None, 1, MAX_PEOPLE)
+    if person is None:
+        raise RequestError("'person' is required: which person to re-roll, 1 for the first")
+    joints = body.get("joints", True)
+    if not isinstance(joints, bool):
+        raise RequestError("'joints' must be true or false")
+    return RerollRequest(scene, person, _int(body, "seed", 0, 0, MAX_SEED), joints)

@@ -130,10 +130,49 @@ async function show(scene) {
     : "";
   $("scrubber").max = viewer.frames - 1;
   setDownloads(scene);
+  setReroll(scene);
   markCurrent(scene.id);
   viewer.play();
   $("play").textContent = "Pause";
   document.body.dataset.scene = scene.id; // the browser test waits for this
+}
+
+// One button per person: that person generated again as a reaction to all the others.
+function setReroll(scene) {
+  const box = $("reroll-buttons");
+  box.replaceChildren();
+  $("reroll").hidden = !(scene.files.npz && scene.people > 1);
+  for (let person = 1; person <= scene.people; person++) {
+    const button = document.createElement("button");
+    button.type = "button";
+    button.id = `reroll-p${person}`;
+    button.textContent = `P${person}`;
+    button.title = `Generate person ${person} again with a new seed`;
+    button.addEventListener("click", () => reroll(scene, person));
+    box.append(button);
+  }
+}
+
+async function reroll(scene, person) {
+  const buttons = $("reroll-buttons").querySelectorAll("button");
+  buttons.forEach((b) => { b.disabled = true; });
+  const seed = Math.floor(Math.random() * 2 ** 31);
+  const pending = api("/api/reroll", {
+    method: "POST",
+    headers: { "Content-Type": "application/json" },
+    body: JSON.stringify({ scene: scene.id, person, seed, joints: false }),
+  });
+  watchGeneration(pending);
+  try {
+    const again = await pending;
+    addHistory(again);
+    await show(again);
+    setStatus(`Person ${person} re-rolled (seed ${seed}); everyone else as before`);
+  } catch (error) {
+    setStatus(error.message, { error: true });
+  } finally {
+    buttons.forEach((b) => { b.disabled = false; });
+  }
 }
 
 function setDownloads(scene) {
@@ -178,7 +217,8 @@ function addHistory(scene) {
   const item = document.createElement("li");
   item.dataset.id = scene.id;
   const seed = scene.seed === null || scene.seed === undefined ? "" : ` (seed ${scene.seed})`;
-  item.textContent = `${scene.text}${seed}, ${scene.people} p.`;
+  const again = scene.reroll ? `, P${scene.reroll.person} re-rolled (seed ${scene.reroll.seed})` : "";
+  item.textContent = `${scene.text}${seed}${again}, ${scene.people} p.`;
   item.title = "Show this scene again";
   item.addEventListener("click", () => show(scene).then(() => setStatus(`Showing: ${scene.text}`)));
   $("history").prepend(item);
