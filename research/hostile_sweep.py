@@ -6,7 +6,7 @@ Builds hostile motion files (BVH that declare millions of frames, zip bombs, wro
 NaN, truncated, junk ...) and hostile requests (cross-site posts, Host tricks, slow clients,
 deep JSON, lone surrogates ...), then sends each through:
 - a real `umf serve` (bundled model, loaded lazily): upload, react, the API;
-- `umf react --actor FILE` and `umf view FILE --no-open`;
+- `umf react --actor FILE`, `umf reroll FILE` and `umf view FILE --no-open`;
 - `umf data prepare --mocap DIR` over all the files at once.
 A case passes when umf answers with one line (CLI: a non-zero exit and one `error:` line, or
 a clean success; server: a 2xx/4xx JSON line) and never a traceback or a 5xx, and the server
@@ -371,6 +371,32 @@ def server_cases(srv: Server, files: dict[str, bytes]) -> list[dict]:
     }
     for name, fn in api.items():
         case("api", name, fn)
+
+    def reroll(body):
+        return lambda: judge_http(srv.ask("POST", "/api/reroll", json.dumps(body).encode(), jsonh))
+
+    answer = srv.ask("POST", "/api/generate", json.dumps(
+        {"prompt": "Two people walk side by side.", "people": 2, "seconds": 1, "joints": False}
+    ).encode(), jsonh)  # fmt: skip
+    sid = json.loads(answer[2]).get("id", "s1") if answer[0] == 200 else "s1"
+    rerolls = {
+        "valid": reroll({"scene": sid, "person": 2, "seed": 3, "joints": False}),
+        "person 0": reroll({"scene": sid, "person": 0}),
+        "person 3 of 2": reroll({"scene": sid, "person": 3}),
+        "person '1'": reroll({"scene": sid, "person": "1"}),
+        "no person": reroll({"scene": sid}),
+        "scene s999": reroll({"scene": "s999", "person": 1}),
+        "scene a list": reroll({"scene": [sid], "person": 1}),
+        "scene 100 KB id": reroll({"scene": "s" * 100_000, "person": 1}),
+        "seed 2^64": reroll({"scene": sid, "person": 1, "seed": 2**64}),
+        "unknown field": reroll({"scene": sid, "person": 1, "prompt": "x"}),
+        "GET": raw("GET", "/api/reroll"),
+        "text/plain": raw(
+            "POST", "/api/reroll", b'{"scene": "s1", "person": 1}', {"Content-Type": "text/plain"}
+        ),
+    }
+    for name, fn in rerolls.items():
+        case("reroll", name, fn)
     return rows
 
 
@@ -535,6 +561,9 @@ def cli_cases(files: dict[str, Path], work: Path, quick: bool) -> list[dict]:
             }
         )
         print(f"{'ok  ' if ok else 'FAIL'} cli    view     {name:34s} {said[:90]}", flush=True)
+    for name in names:  # a scene file of any kind as the scene to re-roll
+        case("reroll", name, ["reroll", str(files[name]), "--person", "1", "--out",
+                              str(work / "reroll"), "--format", "npz"])  # fmt: skip
     lib = work / "library"
     lib.mkdir(exist_ok=True)
     for name in names:
@@ -572,6 +601,9 @@ def cli_cases(files: dict[str, Path], work: Path, quick: bool) -> list[dict]:
             "--actor-person",
             "3",
         ],
+        "reroll --person 0": ["reroll", str(files["valid.npz"]), "--person", "0"],
+        "reroll --seed -1": ["reroll", str(files["valid.npz"]), "--person", "1", "--seed", "-1"],
+        "reroll missing file": ["reroll", str(work / "nope.npz"), "--person", "1"],
         "view a .txt": ["view", str(lib / "x.txt")],
         "data info on junk": ["data", "info", str(lib)],
         "train on junk corpus": ["train", "vae", "--corpus", str(lib), "--out", str(work / "t")],

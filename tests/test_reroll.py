@@ -135,6 +135,19 @@ def test_the_cli_keeps_the_file_people_and_refuses_bad_input(pipe, scene, model,
     assert np.array_equal(new["joints"][2], pipe.reroll(scene, 3, seed=2).joints[2])
     assert len(list((tmp_path / "out").glob("*.bvh"))) == 3
     capsys.readouterr()
+    from umf.scene import Scene
+
+    long = Scene(np.concatenate([scene.joints] * 12, axis=1), None, scene.text, 30.0, fit=False)
+    long_file = long.save(tmp_path / "in" / "long", ["npz"])[0]
+    (one,) = pipe("a person waves", num_people=1, seconds=1.0, seed=0)
+    one_file = one.save(tmp_path / "in" / "one", ["npz"])[0]
+    for path, needle in ((long_file, "the model re-rolls scenes of at most"),
+                         (one_file, "one person, nobody to react to")):  # fmt: skip
+        with pytest.raises(SystemExit) as exit_:
+            run(["reroll", str(path), "--person", "1", "--out", str(tmp_path / "bad"),
+                 "--model", str(model)])  # fmt: skip
+        err = capsys.readouterr().err
+        assert exit_.value.code == 1 and needle in err, err
     for bad, needle in ((["--person", "4"], "has 3 people, no person 4"),
                         (["--person", "1", "--sflow-steps", "0"], "between 1 and 200"),
                         (["--person", "1", "--prompt", " "], "the prompt is empty")):  # fmt: skip

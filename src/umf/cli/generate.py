@@ -229,7 +229,7 @@ def reroll(
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
 ) -> None:
     """Generate one person of a scene again; everyone else stays exactly as they were."""
-    from umf.data.motion_file import open_scene
+    from umf.data.motion_file import FPS, open_motion, open_scene
 
     wanted = parse_formats(formats)
     check_int("--person", person, 1, 1 << 20)
@@ -241,18 +241,23 @@ def reroll(
     if prompt is not None:
         check_request(prompt, 2)
     check_out_dir(out)
-    scene = open_scene(scene_file)  # a 30 fps umf file as it is: the others stay bit for bit
-    if not 1 <= person <= scene.num_people:
-        raise UMFError(f"{scene_file}: has {scene.num_people} people, no person {person}")
-    text = prompt if prompt is not None else scene.text
+    motion = open_motion(scene_file)  # read and checked; resampled and fitted below
+    if motion.num_people < 2:
+        raise UMFError(f"{scene_file}: one person, nobody to react to: generate it again with "
+                       "another seed")  # fmt: skip
+    if not 1 <= person <= motion.num_people:
+        raise UMFError(f"{scene_file}: has {motion.num_people} people, no person {person}")
+    text = prompt if prompt is not None else motion.text
     if not text.strip():
         raise UMFError(f"{scene_file}: has no prompt; give one with --prompt")
-    stem = out / f"reroll-p{person}-{_slug(text)}"
-    check_targets(scene_targets(stem, wanted, scene.num_people))
     config = peek_config(model)
-    if config is not None and scene.num_frames > config.vae.max_frames + 1:
-        raise UMFError(f"{scene_file}: {scene.num_frames} frames; the model re-rolls scenes of "
-                       f"at most {config.vae.max_frames + 1}")  # fmt: skip
+    most = (config.vae.max_frames if config is not None else 300) + 1
+    if motion.frames > most:
+        raise UMFError(f"{scene_file}: {motion.frames / FPS:.1f} s; the model re-rolls scenes of "
+                       f"at most {(most - 1) / FPS:.1f} s")  # fmt: skip
+    stem = out / f"reroll-p{person}-{_slug(text)}"
+    check_targets(scene_targets(stem, wanted, motion.num_people))
+    scene = open_scene(scene_file, motion)  # a 30 fps umf file as it is: the others bit for bit
     pipe = load_pipeline(model)
     warn_unknown(pipe, [text])
     new = pipe.reroll(scene, person, seed=seed, prompt=prompt, guidance=guidance,

@@ -147,11 +147,11 @@ def npz_bodies(path: str | Path, people: int, frames: int):
     return bodies
 
 
-def open_scene(path: str | Path) -> Scene:
+def open_scene(path: str | Path, motion: MotionFile | None = None) -> Scene:
     """A scene file as it is, for re-rolling one of its people: a 30 fps umf ``.npz`` keeps
     its joints and its bodies bit for bit; anything else is resampled and fitted once
-    (:func:`load_motion`)."""
-    motion = open_motion(path)
+    (:func:`load_motion`). ``motion``: the file as :func:`open_motion` already read it."""
+    motion = open_motion(path) if motion is None else motion
     if motion.fps != FPS or "converted_from" in motion.meta:
         return motion.scene()
     bodies = npz_bodies(path, motion.num_people, motion.joints.shape[1])
