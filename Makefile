@@ -9,7 +9,7 @@ OUT    ?= out
 # Full Bandai archives when present (../shared), else the bundled sample clips.
 BANDAI ?= $(firstword $(wildcard ../shared/data/bandai) data/bandai-sample)
 
-.PHONY: install demo serve test test-slow bench lint format corpus clean
+.PHONY: install demo serve test test-slow bench mutation lint format corpus clean
 
 $(STAMP): pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
@@ -47,6 +47,15 @@ test-slow: $(STAMP)
 # Speed of the bundled model on this machine (figures in the README).
 bench: $(STAMP)
 	$(BIN)/python scripts/benchmark.py --out results/benchmark.json
+
+# Mutation testing (mutmut) over the modules of [tool.mutmut] in pyproject.toml; the score
+# and every surviving mutant go to results/mutation/. PYTHONPATH puts the mutated copy
+# before the editable install.
+mutation: $(STAMP)
+	$(BIN)/pip install --quiet -c requirements.lock -e ".[mutation]"
+	rm -rf mutants
+	PYTHONPATH=src OMP_NUM_THREADS=1 $(BIN)/mutmut run
+	PATH=$(abspath $(BIN)):$$PATH $(BIN)/python scripts/mutation_report.py --out results/mutation
 
 # The full corpus: Bandai from ../shared/data/bandai (or BANDAI=...), and where ../shared is
 # present (or MOCAP_DATA=...) the real two-person takes (CMU salsa, CMU handshake) and the

@@ -75,3 +75,36 @@ def test_loss_mask() -> None:
         (pred[2] - target[2]).square().mean(),
     ]
     torch.testing.assert_close(got, torch.stack(per).mean())
+
+
+def test_times_keep_the_tensors_dtype_and_the_sample_its_time() -> None:
+    """A float64 model gets float64 times (a float32 time would round the path), and the
+    path sample carries the very times it was drawn at."""
+    x0, x1 = (x.double() for x in _pair(5))
+    t = torch.tensor([0.1, 0.2, 0.3], dtype=torch.float64)
+    s = linear_path_sample(x0, x1, t)
+    assert s.t is t and s.x_t.dtype == torch.float64
+    third = torch.tensor(1 / 3, dtype=torch.float64)  # not rounded to float32 on the way
+    assert torch.equal(interpolate(x0, x1, 1 / 3), third * x1 + (1 - third) * x0)
+    for dist in ("uniform", "logit_normal"):
+        assert sample_time(4, distribution=dist, dtype=torch.float64).dtype == torch.float64
+
+
+def test_default_times_are_uniform_and_logit_normal_is_exactly_its_formula() -> None:
+    """The default is the uniform draw of the same stream; logit-normal times are
+    sigmoid(loc + scale * z) of the stream's normal draws (not merely distributed alike:
+    a run must reproduce its times)."""
+    g = lambda: torch.Generator().manual_seed(7)  # noqa: E731
+    assert torch.equal(sample_time(64, generator=g()), torch.rand(64, generator=g()))
+    z = torch.randn(64, generator=g())
+    got = sample_time(64, distribution="logit_normal", loc=0.3, scale=0.8, generator=g())
+    assert torch.equal(got, torch.sigmoid(0.3 + 0.8 * z))
+    with pytest.raises(ValueError, match="unknown time distribution 'beta'"):
+        sample_time(4, distribution="beta")  # type: ignore[arg-type]
+
+
+def test_a_sample_with_one_valid_entry_counts_it_once() -> None:
+    """Each sample is averaged over its own valid entries: one valid token is its error."""
+    pred, target = torch.zeros(2, 4), torch.tensor([[3.0, 0, 0, 0], [1.0, 1.0, 1.0, 1.0]])
+    mask = torch.tensor([[True, False, False, False], [True, True, True, True]])
+    assert torch.isclose(flow_matching_loss(pred, target, mask), torch.tensor((9.0 + 1.0) / 2))

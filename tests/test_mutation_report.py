@@ -1,0 +1,30 @@
+"""scripts/mutation_report.py: mutmut's exit codes read into a score per module."""
+
+from __future__ import annotations
+
+import json
+
+from conftest import load_script
+
+
+def test_scores_count_killed_and_timeouts_and_leave_equivalents_out(tmp_path):
+    report = load_script("mutation_report")
+    meta = tmp_path / "mutants" / "src" / "umf" / "flows" / "paths.py.meta"
+    meta.parent.mkdir(parents=True)
+    name = "umf.flows.paths.x_f__mutmut_"
+    codes = {f"{name}1": 1, f"{name}2": 0, f"{name}3": 36, f"{name}4": 33, f"{name}5": None,
+             f"{name}6": 0, "umf.representation.x_g__mutmut_1": 1}  # fmt: skip
+    meta.write_text(json.dumps({"exit_code_by_key": codes}))
+    read = report.read_results(tmp_path / "mutants")
+    assert read == codes
+    assert report.module_of(f"{name}1") == "umf.flows.paths"
+    modules = report.score(read, equivalent={f"{name}6": "same on a CPU"})
+    paths = modules["umf.flows.paths"]
+    assert (paths["killed"], paths["timeout"], paths["survived"], paths["no tests"],
+            paths["not run"], paths["equivalent"]) == (1, 1, 1, 1, 1, 1)  # fmt: skip
+    assert paths["score"] == 0.5  # killed + timeout over killed + timeout + survived + no tests
+    assert paths["survivors"] == [f"{name}2", f"{name}4"]
+    assert modules["umf.representation"]["score"] == 1.0
+    text = report.markdown(modules, {f"{name}2": "x = y"}, {f"{name}6": "same on a CPU"})
+    assert "| `umf.flows.paths` | 5 | 1 | 1 | 1 | 1 | 1 | 50.0 % |" in text
+    assert f"- `{name}2`: `x = y`" in text and "same on a CPU" in text
