@@ -96,7 +96,7 @@ def test_a_prompt_of_its_own_changes_the_new_person_only(pipe, scene):
         ({"person": 4}, "person must be between 1 and 3"),
         ({"person": 1, "seed": -1}, "seed must be between"),
         ({"person": 1, "guidance": float("nan")}, "finite"),
-        ({"person": 1, "sflow_steps": 201}, "sflow_steps must be between 1 and 200"),
+        ({"person": 1, "sflow_steps": 201}, "sflow-steps must be between 1 and 200"),
         ({"person": 1, "prompt": ""}, "the prompt is empty"),
         ({"person": 1, "prompt": ["a", "b"]}, "must be a string"),
     ],

@@ -428,10 +428,7 @@ class UMFPipeline:
 
     def _encode_actor(self, features: torch.Tensor, batch: int) -> torch.Tensor:
         """Latent (batch, p, r) of the canonical actor's features (T, 262): posterior mean."""
-        x = self.normalizer.normalize(features)[None].to(self.device)
-        mask = torch.ones(1, x.shape[1], dtype=torch.bool, device=self.device)
-        mu, _ = self.vae.encode(x, mask)
-        return mu.expand(batch, -1, -1)
+        return self._encode(features[None]).expand(batch, -1, -1)
 
 
 def default_model_dir() -> Path:

@@ -32,7 +32,7 @@ from umf.scene import Scene
 from umf.separation import separate_people, touching_distances
 from umf.streams import scene_generators
 from umf.text import respell_prompt
-from umf.validation import check_float, check_int, check_prompts
+from umf.validation import check_int, check_request
 
 
 def check_reroll(scene: Scene, person: int, fps: float, max_frames: int) -> None:
@@ -70,14 +70,17 @@ def reroll_person(
     check_reroll(scene, person, cfg.fps, cfg.vae.max_frames)
     if prompt is not None and not isinstance(prompt, str):
         raise UMFError(f"the prompt must be a string, got {prompt!r:.60}")
-    text = scene.text if prompt is None else check_prompts(prompt)[0]
-    if not text.strip():
+    if seed is None:
+        raise UMFError("seed must be an integer, got None")
+    if prompt is None and not scene.text.strip():
         raise UMFError("the scene has no prompt: give one")
-    seed = check_int("seed", seed, 0, (1 << 64) - 1)
-    if guidance is not None:
-        guidance = check_float("guidance", guidance, 0.0, 20.0)
+    text = scene.text if prompt is None else prompt
+    # the bounds of any generation request, checked where pipe() checks them
+    req = check_request(text, scene.num_people, seed=seed, guidance=guidance,
+                        sflow_steps=sflow_steps)  # fmt: skip
+    text, seed, guidance = req.prompts[0], req.seed, req.guidance
     n, k = scene.num_people, person - 1
-    steps = check_int("sflow_steps", sflow_steps, 1, 200) if sflow_steps else cfg.sflow.steps_for(n)
+    steps = req.sflow_steps or cfg.sflow.steps_for(n)
     others = [i for i in range(n) if i != k]
     joints = torch.from_numpy(np.ascontiguousarray(scene.joints, dtype=np.float32))
     frame = canonical_transform(joints[others[0]])
