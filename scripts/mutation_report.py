@@ -6,33 +6,53 @@ surviving mutant listed and either explained as equivalent or left to be killed.
 Reads the ``*.meta`` files mutmut 3 leaves under ``mutants/`` (one exit code per mutant:
 1 the tests failed, the mutant is killed; 0 they passed, it survived; 33 no test covers
 it; 36, 24 or -24 it ran out of time, counted as killed as mutmut does; none, not run) and
-the diff of each survivor (``mutmut show``). The score is killed / (run - equivalent).
+each survivor's changed line, read off the mutated copies. The score is killed / (run - equivalent).
 Writes ``README.md`` and ``mutation.json`` under ``--out``.
 """
 
 from __future__ import annotations
 
 import argparse
+import ast
+import difflib
 import json
-import subprocess
 import sys
 from pathlib import Path
 
 TIMEOUT_CODES = {36, 24, -24, 152}
 
-# mutants that cannot change behaviour here, and why (name -> reason). Device arguments are
-# None on a CPU-only machine anyway; a GPU run of the tests would tell them apart.
-EQUIVALENT = {
-    "umf.flows.paths.x_expand_time__mutmut_4": "device=None: the default device is the CPU's",
-    "umf.flows.paths.x_expand_time__mutmut_7": "device dropped: the default device is the CPU's",
-    "umf.flows.paths.x_sample_time__mutmut_10": "device=None: the default device is the CPU's",
-    "umf.flows.paths.x_sample_time__mutmut_14": "device dropped: the default device is the CPU's",
-    "umf.flows.paths.x_sample_time__mutmut_22": "device=None: the default device is the CPU's",
-    "umf.flows.paths.x_sample_time__mutmut_26": "device dropped: the default device is the CPU's",
-    "umf.flows.paths.x_flow_matching_loss__mutmut_5": (
-        "mask.to(None) keeps the bool mask: bool x float multiplies and sums the same"
-    ),
-}
+# Mutants that cannot change behaviour here, and why. Keyed by the function a mutant lives in
+# and its changed line (as `mutmut show` prints it), not by mutmut's numbering, which shifts
+# whenever a function gains a line. Device arguments are None on a CPU-only machine anyway; a
+# GPU run of the tests would tell them apart.
+CPU = "the default device is the CPU's"
+EQUIVALENT: dict[tuple[str, str], str] = {
+    ("umf.flows.paths.x_expand_time",
+     "t = torch.as_tensor(t, dtype=like.dtype, device=None)"): f"device=None: {CPU}",
+    ("umf.flows.paths.x_expand_time",
+     "t = torch.as_tensor(t, dtype=like.dtype, )"): f"device dropped: {CPU}",
+    ("umf.flows.paths.x_sample_time",
+     "return torch.rand(batch, generator=generator, device=None, dtype=dtype)"):
+        f"device=None: {CPU}",
+    ("umf.flows.paths.x_sample_time",
+     "return torch.rand(batch, generator=generator, dtype=dtype)"): f"device dropped: {CPU}",
+    ("umf.flows.paths.x_sample_time",
+     "z = torch.randn(batch, generator=generator, device=None, dtype=dtype)"):
+        f"device=None: {CPU}",
+    ("umf.flows.paths.x_sample_time",
+     "z = torch.randn(batch, generator=generator, dtype=dtype)"): f"device dropped: {CPU}",
+    ("umf.flows.paths.x_flow_matching_loss", "m = mask.to(None)"):
+        "mask.to(None) keeps the bool mask: bool x float multiplies and sums the same",
+}  # fmt: skip
+
+
+def function_of(mutant: str) -> str:
+    """``umf.flows.paths.x_expand_time__mutmut_4`` -> ``umf.flows.paths.x_expand_time``."""
+    return mutant.rsplit("__mutmut_", 1)[0]
+
+
+def equivalent_reason(mutant: str, diff: str, equivalent: dict) -> str | None:
+    return equivalent.get((function_of(mutant), diff))
 
 
 def classify(code: int | None) -> str:
@@ -62,16 +82,21 @@ def read_results(mutants: Path) -> dict[str, int | None]:
     return codes
 
 
-def score(codes: dict[str, int | None], equivalent: dict[str, str] = EQUIVALENT) -> dict:
-    """Per module: counts by outcome, equivalents among the survivors, and the score."""
+def score(codes: dict[str, int | None], diffs: dict[str, str] | None = None,
+          equivalent: dict = EQUIVALENT) -> dict:
+    """Per module: counts by outcome, equivalents among the survivors (matched on their
+    function and changed line, ``diffs``), and the score."""
+    diffs = diffs or {}
     modules: dict[str, dict] = {}
     for name, code in sorted(codes.items()):
         m = modules.setdefault(module_of(name), {"killed": 0, "survived": 0, "timeout": 0,
                                                  "no tests": 0, "not run": 0,
                                                  "equivalent": 0, "survivors": []})  # fmt: skip
         kind = classify(code)
-        if kind == "survived" and name in equivalent:
+        reason = equivalent_reason(name, diffs.get(name, ""), equivalent)
+        if kind == "survived" and reason is not None:
             m["equivalent"] += 1
+            m.setdefault("equivalents", {})[name] = reason
         else:
             m[kind] += 1
             if kind in ("survived", "no tests"):
@@ -83,18 +108,37 @@ def score(codes: dict[str, int | None], equivalent: dict[str, str] = EQUIVALENT)
     return modules
 
 
-def diff_of(name: str) -> str:
-    """The changed line of a mutant (``mutmut show``), or '' when mutmut is not at hand."""
-    try:
-        out = subprocess.run(["mutmut", "show", name], capture_output=True, text=True,
-                             timeout=60).stdout  # fmt: skip
-    except (OSError, subprocess.TimeoutExpired):
+def mutant_sources(mutants: Path) -> dict[str, str]:
+    """Every mutant's function source and every original's (``..__mutmut_orig``), read off
+    the mutated copies under ``mutants/src`` (faster than one ``mutmut show`` per mutant)."""
+    sources: dict[str, str] = {}
+    root = mutants / "src"
+    for path in sorted(root.rglob("*.py")):
+        text = path.read_text()
+        if "__mutmut_" not in text:
+            continue
+        module = ".".join(path.relative_to(root).with_suffix("").parts)
+        for node in ast.walk(ast.parse(text)):
+            if isinstance(node, ast.FunctionDef | ast.AsyncFunctionDef) and (
+                    "__mutmut_" in node.name):  # fmt: skip
+                sources[f"{module}.{node.name}"] = ast.get_source_segment(text, node) or ""
+    return sources
+
+
+def changed_line(mutant: str, sources: dict[str, str]) -> str:
+    """The first line of a mutant's function that differs from the original's, stripped;
+    '' when it cannot be told (the mutated copies are gone)."""
+    mine = sources.get(mutant, "").splitlines()[1:]
+    orig = sources.get(function_of(mutant) + "__mutmut_orig", "").splitlines()[1:]
+    if not mine or not orig:
         return ""
-    lines = [ln[1:].strip() for ln in out.splitlines() if ln.startswith("+ ")]
-    return lines[-1] if lines else ""
+    for line in difflib.ndiff(orig, mine):
+        if line.startswith("+ "):
+            return line[2:].strip()
+    return "(a line removed)" if len(mine) < len(orig) else ""
 
 
-def markdown(modules: dict, diffs: dict[str, str], equivalent: dict[str, str]) -> str:
+def markdown(modules: dict, diffs: dict[str, str]) -> str:
     lines = ["# Mutation score (`make mutation`)", "",
              "mutmut 3 over the modules of `[tool.mutmut]` in `pyproject.toml`, each mutant "
              "run against the tests that cover it. Score: killed (timeouts included) over "
@@ -106,11 +150,16 @@ def markdown(modules: dict, diffs: dict[str, str], equivalent: dict[str, str]) -
         pct = "—" if m["score"] is None else f"{100 * m['score']:.1f} %"
         lines.append(f"| `{name}` | {run} | {m['killed']} | {m['timeout']} | {m['survived']} "
                      f"| {m['no tests']} | {m['equivalent']} | {pct} |")  # fmt: skip
+    caught = sum(m["killed"] + m["timeout"] for m in modules.values())
+    judged = caught + sum(m["survived"] + m["no tests"] for m in modules.values())
+    if judged:
+        lines.append(f"| **all** | | | | | | | **{100 * caught / judged:.1f} %** |")
     survivors = [s for m in modules.values() for s in m["survivors"]]
     lines += ["", f"## Surviving mutants ({len(survivors)})", ""]
     lines += [f"- `{s}`: `{diffs.get(s, '')}`" for s in survivors] or ["None."]
-    lines += ["", f"## Equivalent mutants ({len(equivalent)})", ""]
-    lines += [f"- `{k}`: `{diffs.get(k, '')}`: {v}" for k, v in equivalent.items()]
+    equivalents = {k: v for m in modules.values() for k, v in m.get("equivalents", {}).items()}
+    lines += ["", f"## Equivalent mutants ({len(equivalents)})", ""]
+    lines += [f"- `{k}`: `{diffs.get(k, '')}`: {v}" for k, v in equivalents.items()]
     return "\n".join(lines) + "\n"
 
 
@@ -122,14 +171,14 @@ def main() -> None:
     codes = read_results(args.mutants)
     if not codes:
         sys.exit(f"error: no mutmut results under {args.mutants} (run `make mutation`)")
-    modules = score(codes)
-    seen = [s for m in modules.values() for s in m["survivors"]]
-    equivalent = {k: v for k, v in EQUIVALENT.items() if k in codes}
-    diffs = {name: diff_of(name) for name in [*seen, *equivalent]}
+    sources = mutant_sources(args.mutants)
+    diffs = {name: changed_line(name, sources) for name, code in codes.items()
+             if classify(code) in ("survived", "no tests")}  # fmt: skip
+    modules = score(codes, diffs)
     args.out.mkdir(parents=True, exist_ok=True)
-    report = {"modules": modules, "equivalent": equivalent, "diffs": diffs}
+    report = {"modules": modules, "diffs": diffs}
     (args.out / "mutation.json").write_text(json.dumps(report, indent=1) + "\n")
-    (args.out / "README.md").write_text(markdown(modules, diffs, equivalent))
+    (args.out / "README.md").write_text(markdown(modules, diffs))
     for name, m in modules.items():
         print(f"{name}: score {m['score']}, {len(m['survivors'])} surviving")
 

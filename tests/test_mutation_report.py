@@ -18,13 +18,14 @@ def test_scores_count_killed_and_timeouts_and_leave_equivalents_out(tmp_path):
     read = report.read_results(tmp_path / "mutants")
     assert read == codes
     assert report.module_of(f"{name}1") == "umf.flows.paths"
-    modules = report.score(read, equivalent={f"{name}6": "same on a CPU"})
+    modules = report.score(read, {f"{name}6": "x = 1"},
+                           equivalent={("umf.flows.paths.x_f", "x = 1"): "same on a CPU"})
     paths = modules["umf.flows.paths"]
     assert (paths["killed"], paths["timeout"], paths["survived"], paths["no tests"],
             paths["not run"], paths["equivalent"]) == (1, 1, 1, 1, 1, 1)  # fmt: skip
     assert paths["score"] == 0.5  # killed + timeout over killed + timeout + survived + no tests
     assert paths["survivors"] == [f"{name}2", f"{name}4"]
     assert modules["umf.representation"]["score"] == 1.0
-    text = report.markdown(modules, {f"{name}2": "x = y"}, {f"{name}6": "same on a CPU"})
+    text = report.markdown(modules, {f"{name}2": "x = y", f"{name}6": "x = 1"})
     assert "| `umf.flows.paths` | 5 | 1 | 1 | 1 | 1 | 1 | 50.0 % |" in text
     assert f"- `{name}2`: `x = y`" in text and "same on a CPU" in text
