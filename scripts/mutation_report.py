@@ -6,7 +6,8 @@ surviving mutant listed and either explained as equivalent or left to be killed.
 Reads the ``*.meta`` files mutmut 3 leaves under ``mutants/`` (one exit code per mutant:
 1 the tests failed, the mutant is killed; 0 they passed, it survived; 33 no test covers
 it; 36, 24 or -24 it ran out of time, counted as killed as mutmut does; none, not run) and
-each survivor's changed line, read off the mutated copies. The score is killed / (run - equivalent).
+each survivor's changed line, read off the mutated copies. The score is
+killed / (run - equivalent).
 Writes ``README.md`` and ``mutation.json`` under ``--out``.
 """
 
@@ -51,10 +52,6 @@ def function_of(mutant: str) -> str:
     return mutant.rsplit("__mutmut_", 1)[0]
 
 
-def equivalent_reason(mutant: str, diff: str, equivalent: dict) -> str | None:
-    return equivalent.get((function_of(mutant), diff))
-
-
 def classify(code: int | None) -> str:
     if code is None:
         return "not run"
@@ -93,8 +90,10 @@ def score(codes: dict[str, int | None], diffs: dict[str, str] | None = None,
                                                  "no tests": 0, "not run": 0,
                                                  "equivalent": 0, "survivors": []})  # fmt: skip
         kind = classify(code)
-        reason = equivalent_reason(name, diffs.get(name, ""), equivalent)
-        if kind == "survived" and reason is not None:
+        reason = None
+        if kind == "survived":
+            reason = equivalent.get((function_of(name), diffs.get(name, "")))
+        if reason is not None:
             m["equivalent"] += 1
             m.setdefault("equivalents", {})[name] = reason
         else:

@@ -18,8 +18,9 @@ def test_scores_count_killed_and_timeouts_and_leave_equivalents_out(tmp_path):
     read = report.read_results(tmp_path / "mutants")
     assert read == codes
     assert report.module_of(f"{name}1") == "umf.flows.paths"
-    modules = report.score(read, {f"{name}6": "x = 1"},
-                           equivalent={("umf.flows.paths.x_f", "x = 1"): "same on a CPU"})
+    modules = report.score(
+        read, {f"{name}6": "x = 1"}, equivalent={("umf.flows.paths.x_f", "x = 1"): "same on a CPU"}
+    )
     paths = modules["umf.flows.paths"]
     assert (paths["killed"], paths["timeout"], paths["survived"], paths["no tests"],
             paths["not run"], paths["equivalent"]) == (1, 1, 1, 1, 1, 1)  # fmt: skip
@@ -29,3 +30,30 @@ def test_scores_count_killed_and_timeouts_and_leave_equivalents_out(tmp_path):
     text = report.markdown(modules, {f"{name}2": "x = y", f"{name}6": "x = 1"})
     assert "| `umf.flows.paths` | 5 | 1 | 1 | 1 | 1 | 1 | 50.0 % |" in text
     assert f"- `{name}2`: `x = y`" in text and "same on a CPU" in text
+
+
+def test_changed_lines_are_read_off_the_mutated_copies(tmp_path):
+    report = load_script("mutation_report")
+    copy = tmp_path / "mutants" / "src" / "umf" / "flows" / "paths.py"
+    copy.parent.mkdir(parents=True)
+    copy.write_text(
+        "def x_f__mutmut_orig(a):\n    b = a + 1\n    return b * 2\n\n"
+        "def x_f__mutmut_1(a):\n    b = a - 1\n    return b * 2\n\n"
+        "def x_f__mutmut_2(a):\n    b = a + 1\n\n"
+        "class C:\n    def xǁCǁg__mutmut_orig(self):\n        return 1\n"
+        "    def xǁCǁg__mutmut_1(self):\n        return 2\n"
+    )
+    sources = report.mutant_sources(tmp_path / "mutants")
+    assert set(sources) == {f"umf.flows.paths.{n}" for n in (
+        "x_f__mutmut_orig", "x_f__mutmut_1", "x_f__mutmut_2", "xǁCǁg__mutmut_orig",
+        "xǁCǁg__mutmut_1")}  # fmt: skip
+    assert report.changed_line("umf.flows.paths.x_f__mutmut_1", sources) == "b = a - 1"
+    assert report.changed_line("umf.flows.paths.x_f__mutmut_2", sources) == "(a line removed)"
+    assert report.changed_line("umf.flows.paths.xǁCǁg__mutmut_1", sources) == "return 2"
+    assert report.changed_line("umf.flows.paths.x_h__mutmut_1", sources) == ""
+    codes = {"umf.flows.paths.x_f__mutmut_1": 0, "umf.flows.paths.x_f__mutmut_2": 0}
+    diffs = {n: report.changed_line(n, sources) for n in codes}
+    modules = report.score(codes, diffs, {("umf.flows.paths.x_f", "b = a - 1"): "same here"})
+    paths = modules["umf.flows.paths"]
+    assert paths["equivalents"] == {"umf.flows.paths.x_f__mutmut_1": "same here"}
+    assert paths["survivors"] == ["umf.flows.paths.x_f__mutmut_2"] and paths["score"] == 0.0

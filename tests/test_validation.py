@@ -159,7 +159,7 @@ def test_check_for_model_frames_and_stage_counts():
         v.check_for_model(v.check_request("a", seconds=5.1), _config(max_frames=150))
     with refused("--seconds must be between 1.0 and 10.0, got 0.9"):
         v.check_for_model(v.check_request("a", seconds=0.9), _config(fps=15.0, max_frames=150))
-    # a model that cannot hold the request is refused even when acting: not the length
+    # acting, the length is the actor's, so --seconds is not held against the model
     assert v.check_for_model(v.check_request("a", seconds=10.0), _config(max_frames=20),
                              acting=True) == 0  # fmt: skip
     with refused("--steps needs 3 count(s) for this model's 3-stage pyramid (coarse to fine), "
