@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import os
 from pathlib import Path
 
 import pytest
@@ -12,6 +13,23 @@ BANDAI_FIXTURE = Path(__file__).resolve().parents[1] / "data" / "bandai-sample"
 SHARED_BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai"
 
 torch.set_num_threads(2)
+
+
+def _shared(scope: str):
+    """A fixture scope that is ``scope`` except in mutmut's stats run, where it is per test.
+
+    mutmut learns which tests cover a function by crediting every call to the test running
+    when it happens; a module fixture's calls would go to the first test that builds it, and
+    a mutant of those functions would never run the later tests (issue 39)."""
+
+    def decide(fixture_name: str, config) -> str:
+        return "function" if os.environ.get("MUTANT_UNDER_TEST") == "stats" else scope
+
+    return decide
+
+
+MODULE = _shared("module")
+SESSION = _shared("session")
 
 
 def load_script(name: str):
@@ -47,14 +65,14 @@ def one_thread():
     torch.set_num_threads(before)
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope=SESSION)
 def bandai_clips():
     from umf.data.bandai import load_bandai
 
     return list(load_bandai(BANDAI_FIXTURE))
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope=SESSION)
 def actors(bandai_clips):
     """The bundled clips as scene-composer actors (person 1 of each clip)."""
     from umf.data.scenes import Actor
@@ -65,7 +83,7 @@ def actors(bandai_clips):
     ]
 
 
-@pytest.fixture(scope="session")
+@pytest.fixture(scope=SESSION)
 def real_joints(bandai_clips):
     """One real walking clip, (T, 22, 3) float64 torch, for maths tests."""
     clip = next(c for c in bandai_clips if c.id == "dataset-1_walk_normal_001")

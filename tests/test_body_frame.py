@@ -7,6 +7,7 @@ import math
 import pytest
 import torch
 
+from conftest import MODULE
 from umf.body_frame import (
     BODY_DIM,
     HEADING,
@@ -20,7 +21,7 @@ from umf.body_frame import (
 from umf.representation import joints_to_features, place_features
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def walk(real_joints):
     return joints_to_features(real_joints)  # (T - 1, 262) float64, canonical
 

@@ -15,6 +15,7 @@ import pygltflib
 import pytest
 from scipy.spatial.transform import Rotation
 
+from conftest import MODULE
 from umf.errors import UMFError
 from umf.exports.gltf import write_glb
 from umf.pipeline import Scene
@@ -120,14 +121,14 @@ def real_scene(real_joints, bandai_clips, people: int) -> np.ndarray:
     return np.stack(motions[:people])
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def scene3(real_joints, bandai_clips) -> Scene:
     joints = real_scene(real_joints, bandai_clips, 3).astype(np.float32)
     return Scene(joints, np.zeros((3, 100, 262), np.float32), "three people: walk, kick, wave",
                  FPS, seed=7, model="test-model")  # fmt: skip
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def glb3(scene3, tmp_path_factory) -> Path:
     return scene3.save_glb(tmp_path_factory.mktemp("glb") / "three.glb")
 

@@ -19,7 +19,7 @@ import pytest
 import torch
 from scipy.spatial.transform import Rotation
 
-from conftest import BANDAI_FIXTURE
+from conftest import BANDAI_FIXTURE, MODULE
 from test_export_glb import _VALIDATE_JS, _validator_package, skin_joint_positions
 from umf.exports import FORMATS
 from umf.skeleton import JOINT_NAMES, PARENTS
@@ -34,7 +34,7 @@ BOW = BANDAI_FIXTURE / "Bandai-Namco-Research-Motiondataset-1/data/dataset-1_bow
 SMPL_PARENTS = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19, 20, 21]
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def pipe():
     from umf import UMFPipeline
 
@@ -42,7 +42,7 @@ def pipe():
     return UMFPipeline.from_pretrained()
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def scenes(pipe):
     from umf.data.motion_file import load_motion
 
@@ -52,7 +52,7 @@ def scenes(pipe):
     return {"three": three, "react": react, "actor": actor}
 
 
-@pytest.fixture(scope="module", params=["three", "react"])
+@pytest.fixture(scope=MODULE, params=["three", "react"])
 def written(request, scenes, tmp_path_factory):
     scene = scenes[request.param]
     out = tmp_path_factory.mktemp(request.param)

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import torch
 
+from conftest import MODULE
 from umf.data.humanml3d import Caption, SkippedItemWarning, load_humanml3d, parse_caption_line
 from umf.errors import UMFError
 from umf.humanml3d import (
@@ -72,7 +73,7 @@ def canonical(joints: torch.Tensor) -> torch.Tensor:
     return (joints - ground) @ yaw_matrix(-heading_angle(joints[0])).T
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def walk() -> torch.Tensor:
     return walking_motion()
 

@@ -57,3 +57,16 @@ def test_changed_lines_are_read_off_the_mutated_copies(tmp_path):
     paths = modules["umf.flows.paths"]
     assert paths["equivalents"] == {"umf.flows.paths.x_f__mutmut_1": "same here"}
     assert paths["survivors"] == ["umf.flows.paths.x_f__mutmut_2"] and paths["score"] == 0.0
+
+
+def test_shared_fixtures_are_per_test_only_in_mutmuts_stats_run(monkeypatch):
+    """mutmut credits a call to the test running when it happens: in its stats run a
+    module fixture must be rebuilt by each test, elsewhere it stays shared."""
+    from conftest import MODULE, SESSION
+
+    monkeypatch.setenv("MUTANT_UNDER_TEST", "stats")
+    assert MODULE("walk", None) == SESSION("walk", None) == "function"
+    monkeypatch.setenv("MUTANT_UNDER_TEST", "umf.flows.paths.x_expand_time__mutmut_4")
+    assert (MODULE("walk", None), SESSION("walk", None)) == ("module", "session")
+    monkeypatch.delenv("MUTANT_UNDER_TEST")
+    assert (MODULE("walk", None), SESSION("walk", None)) == ("module", "session")

@@ -7,24 +7,24 @@ import numpy as np
 import pytest
 import torch
 
-from conftest import FakeText, save_tiny_model
+from conftest import MODULE, FakeText, save_tiny_model
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def model(tmp_path_factory):
     return save_tiny_model(tmp_path_factory.mktemp("tiny") / "model", seed=1)
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def pipe(model):
     return UMFPipeline.from_pretrained(model, text_encoder=FakeText())
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def scene(pipe):
     return pipe("three people walk side by side", num_people=3, seconds=1.0, seed=4)[0]
 
