@@ -287,3 +287,130 @@ def test_bad_inputs_are_one_line_errors(tmp_path, shape, fps, names):
     with pytest.raises(UMFError):
         write_glb(tmp_path / "bad.glb", np.zeros(shape), fps, names=names)
     assert not (tmp_path / "bad.glb").exists()
+
+
+# ----------------------------------------------------------------- the body mesh
+def _person_mesh(gltf: pygltflib.GLTF2, i: int):
+    """Person ``i``'s body: positions, normals, joint of each vertex, triangles, and the
+    rest-pose world positions of its 22 joints."""
+    node = next(nd for nd in gltf.nodes if nd.skin == i)
+    prim = gltf.meshes[node.mesh].primitives[0]
+    attr = prim.attributes
+    joints, weights = accessor(gltf, attr.JOINTS_0), accessor(gltf, attr.WEIGHTS_0)
+    np.testing.assert_array_equal(weights[:, 0], 1.0)  # rigid: one joint, weight 1
+    np.testing.assert_array_equal(weights[:, 1:], 0.0)
+    np.testing.assert_array_equal(joints[:, 1:], 0)
+    rest = world_matrices(gltf, animate=False)[0][gltf.skins[i].joints][:, :3, 3]
+    tri = accessor(gltf, prim.indices)[:, 0].reshape(-1, 3)
+    return (accessor(gltf, attr.POSITION).astype(np.float64), accessor(gltf, attr.NORMAL),
+            joints[:, 0], tri, rest)  # fmt: skip
+
+
+def _boxes(pos, nrm, jnt, tri):
+    """Split the mesh into its boxes (24 vertices, 12 triangles each) and measure each one
+    from its vertices alone: (joint, centre, axes (3, 3), lengths (3,)). Checks on the way
+    that each is a closed, outward-wound box."""
+    assert len(pos) % 24 == 0 and len(tri) == len(pos) // 2
+    out = []
+    for b in range(len(pos) // 24):
+        v, t = slice(24 * b, 24 * b + 24), tri[12 * b: 12 * b + 12]
+        assert ((t >= 24 * b) & (t < 24 * b + 24)).all()
+        assert len(set(jnt[v])) == 1  # a box moves with one joint
+        normals = np.unique(np.round(nrm[v].astype(np.float64), 4), axis=0)
+        assert len(normals) == 6
+        np.testing.assert_allclose(np.linalg.norm(normals, axis=1), 1.0, atol=1e-4)
+        axes = _three_axes(normals / np.linalg.norm(normals, axis=1, keepdims=True))
+        np.testing.assert_allclose(axes @ axes.T, np.eye(3), atol=1e-4)  # a rectangular box
+        proj = pos[v] @ axes.T
+        lo, hi = proj.min(0), proj.max(0)
+        assert np.all(np.isclose(proj, lo, atol=1e-5) | np.isclose(proj, hi, atol=1e-5))
+        corners = np.unique(np.round(pos[v], 5), axis=0)
+        assert len(corners) == 8
+        keys = [tuple(np.round(p, 5)) for p in pos]  # faces share positions, not vertices
+        edges = [(keys[a], keys[c]) for x in t for a, c in ((x[0], x[1]), (x[1], x[2]),
+                                                             (x[2], x[0]))]  # fmt: skip
+        assert sorted(edges) == sorted((c, a) for a, c in edges)  # closed: each edge twice,
+        assert len(set(edges)) == len(edges)  # once each way
+        a, c, d = pos[t[:, 0]], pos[t[:, 1]], pos[t[:, 2]]
+        volume = np.einsum("ij,ij->i", a, np.cross(c, d)).sum() / 6  # divergence theorem
+        np.testing.assert_allclose(volume, np.prod(hi - lo), rtol=1e-3)  # > 0: outward
+        out.append((int(jnt[24 * b]), pos[v].mean(0), axes, hi - lo))  # 3 faces per corner
+    return out
+
+
+def _three_axes(normals: np.ndarray) -> np.ndarray:
+    """One normal of each opposite pair."""
+    axes: list[np.ndarray] = []
+    for n in normals:
+        if not any(np.allclose(n, -m, atol=1e-3) for m in axes):
+            axes.append(n)
+    assert len(axes) == 3
+    return np.array(axes)
+
+
+def test_body_is_a_box_per_bone_head_and_hand(glb3):
+    """Each bone's box runs from its parent joint to its child and moves with the parent;
+    the head box sits above the head joint, each hand box beyond its wrist, and every box
+    is a closed, outward-wound box of human size."""
+    gltf = pygltflib.GLTF2().load_binary(glb3)
+    parents = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19]
+    for i in range(len(gltf.skins)):
+        pos, nrm, jnt, tri, rest = _person_mesh(gltf, i)
+        boxes = _boxes(pos, nrm, jnt, tri)
+        assert len(boxes) == 21 + 1 + 2
+        for j in range(1, 22):  # one box per bone, found by where it is
+            bone = rest[j] - rest[parents[j]]
+            mid = (rest[j] + rest[parents[j]]) / 2
+            found = [b for b in boxes if np.linalg.norm(b[1] - mid) < 1e-4]
+            assert len(found) == 1, (i, j)
+            joint, _, axes, lengths = found[0]
+            assert joint == parents[j]
+            along = np.argmax(np.abs(axes @ bone))
+            np.testing.assert_allclose(abs(axes[along] @ bone), np.linalg.norm(bone), atol=1e-5)
+            np.testing.assert_allclose(lengths[along], np.linalg.norm(bone), atol=1e-4)
+            across = np.delete(lengths, along)
+            assert ((across > 0.05) & (across < 0.3)).all(), (j, across)  # 5-30 cm thick
+        head = [b for b in boxes if b[0] == 15]
+        assert len(head) == 1
+        _, centre, axes, lengths = head[0]
+        np.testing.assert_allclose(np.abs(axes), np.eye(3)[np.argmax(np.abs(axes), 1)],
+                                   atol=1e-6)  # fmt: skip
+        lift = centre - rest[15]
+        np.testing.assert_allclose(lift[[0, 2]], 0.0, atol=1e-5)
+        assert 0.03 < lift[1] < 0.12  # above the head joint, which it contains
+        size = lengths[np.argmax(np.abs(axes), 1).argsort()]  # x, y, z
+        assert ((size > 0.12) & (size < 0.3)).all() and size[1] == size.max()  # tallest
+        for w, side in ((20, 1.0), (21, -1.0)):  # l_wrist on +x in the T-pose
+            hand = [b for b in boxes if b[0] == w]
+            assert len(hand) == 1
+            _, centre, axes, lengths = hand[0]
+            along = np.argmax(np.abs(axes[:, 0]))
+            np.testing.assert_allclose(abs(axes[along, 0]), 1.0, atol=1e-6)
+            np.testing.assert_allclose(lengths[along], 0.09, atol=1e-5)  # 9 cm long
+            np.testing.assert_allclose(centre - rest[w], [side * 0.045, 0, 0], atol=1e-5)
+            assert 0.01 < np.delete(lengths, along).min() < 0.05  # flat: a palm, not a cube
+
+
+def test_materials_are_matte_in_the_renders_colours(real_joints, tmp_path):
+    """Person k's material is matte in the GIF's colour k; past the 12-colour palette the
+    colours come round again, 30 % darker per round (never black)."""
+    import matplotlib.colors as mcolors
+
+    from umf.render import PALETTE
+
+    people = 13
+    joints = np.stack([real_joints.numpy()[:4] + [3.0 * k, 0, 0] for k in range(people)])
+    gltf = pygltflib.GLTF2().load_binary(write_glb(tmp_path / "crowd.glb", joints, FPS))
+    assert len(gltf.materials) == people
+    for k in range(people):
+        node = next(nd for nd in gltf.nodes if nd.skin == k)
+        material = gltf.materials[gltf.meshes[node.mesh].primitives[0].material]
+        pbr = material.pbrMetallicRoughness
+        assert pbr.metallicFactor == 0.0 and pbr.roughnessFactor == 0.7
+        *linear, alpha = pbr.baseColorFactor
+        assert alpha == 1.0
+        linear = np.array(linear)
+        srgb = np.where(linear <= 0.0031308, linear * 12.92,
+                        1.055 * linear ** (1 / 2.4) - 0.055)  # fmt: skip
+        want = np.array(mcolors.to_rgb(PALETTE[k % 12])) * (0.7 if k >= 12 else 1.0)
+        np.testing.assert_allclose(srgb, want, atol=2e-5)
