@@ -399,7 +399,7 @@ def test_materials_are_matte_in_the_renders_colours(real_joints, tmp_path):
     from umf.render import PALETTE
 
     people = 13
-    joints = np.stack([real_joints.numpy()[:4] + [3.0 * k, 0, 0] for k in range(people)])
+    joints = np.stack([real_joints.numpy()[:4] + np.array([3.0 * k, 0, 0]) for k in range(people)])
     gltf = pygltflib.GLTF2().load_binary(write_glb(tmp_path / "crowd.glb", joints, FPS))
     assert len(gltf.materials) == people
     for k in range(people):
