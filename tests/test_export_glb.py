@@ -313,7 +313,7 @@ def _boxes(pos, nrm, jnt, tri):
     assert len(pos) % 24 == 0 and len(tri) == len(pos) // 2
     out = []
     for b in range(len(pos) // 24):
-        v, t = slice(24 * b, 24 * b + 24), tri[12 * b: 12 * b + 12]
+        v, t = slice(24 * b, 24 * b + 24), tri[12 * b : 12 * b + 12]
         assert ((t >= 24 * b) & (t < 24 * b + 24)).all()
         assert len(set(jnt[v])) == 1  # a box moves with one joint
         normals = np.unique(np.round(nrm[v].astype(np.float64), 4), axis=0)
