@@ -31,6 +31,32 @@ def _shared(scope: str):
 MODULE = _shared("module")
 SESSION = _shared("session")
 
+# The end-to-end tests (a model trained from scratch, the bundled model in every format)
+# take 15-60 s a run; under mutmut they run only for the mutants of the modules they are
+# the tests of, so a mutant elsewhere is scored by its own module's tests alone: a lower
+# bound on what `make test` catches (results/mutation/README.md says so)
+END_TO_END = {"test_pipeline.py": ("umf.pipeline.",), "test_reroll.py": ("umf.pipeline.",),
+              "test_exports_agree.py": ("umf.pipeline.", "umf.exports.")}  # fmt: skip
+
+
+def mutation_scope(items: list, mutant: str) -> tuple[list, list]:
+    """(kept, dropped) test items for a run against ``mutant`` (``module.x_fn__mutmut_N``;
+    anything else, such as mutmut's "stats" run or no mutant, keeps every test)."""
+    if not mutant.startswith("umf."):
+        return list(items), []
+    kept, dropped = [], []
+    for item in items:
+        owners = END_TO_END.get(Path(str(item.fspath)).name)
+        (kept if owners is None or mutant.startswith(owners) else dropped).append(item)
+    return kept, dropped
+
+
+def pytest_collection_modifyitems(config, items) -> None:
+    kept, dropped = mutation_scope(items, os.environ.get("MUTANT_UNDER_TEST", ""))
+    if dropped:
+        config.hook.pytest_deselected(items=dropped)
+        items[:] = kept
+
 
 def load_script(name: str):
     """A module of ``scripts/`` or ``research/`` (not packages), imported from its file for

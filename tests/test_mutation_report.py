@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+from pathlib import Path
 
 from conftest import load_script
 
@@ -70,3 +71,22 @@ def test_shared_fixtures_are_per_test_only_in_mutmuts_stats_run(monkeypatch):
     assert (MODULE("walk", None), SESSION("walk", None)) == ("module", "session")
     monkeypatch.delenv("MUTANT_UNDER_TEST")
     assert (MODULE("walk", None), SESSION("walk", None)) == ("module", "session")
+
+
+def test_end_to_end_tests_run_only_for_their_own_modules_mutants():
+    from types import SimpleNamespace
+
+    from conftest import mutation_scope
+
+    items = [SimpleNamespace(fspath=f"/x/tests/{name}") for name in
+             ("test_flow_paths.py", "test_pipeline.py", "test_exports_agree.py")]  # fmt: skip
+
+    def kept(mutant):
+        return [Path(i.fspath).name for i in mutation_scope(items, mutant)[0]]
+
+    assert kept("umf.flows.paths.x_expand_time__mutmut_4") == ["test_flow_paths.py"]
+    assert kept("umf.exports.gltf.x__box__mutmut_3") == ["test_flow_paths.py",
+                                                         "test_exports_agree.py"]  # fmt: skip
+    everything = ["test_flow_paths.py", "test_pipeline.py", "test_exports_agree.py"]
+    assert kept("umf.pipeline.x_clean_up__mutmut_1") == everything
+    assert kept("stats") == kept("") == everything  # mutmut's stats run, plain pytest
