@@ -12,7 +12,9 @@ FIXTURES = Path(__file__).parent / "fixtures"
 BANDAI_FIXTURE = Path(__file__).resolve().parents[1] / "data" / "bandai-sample"
 SHARED_BANDAI = Path(__file__).resolve().parents[2] / "shared" / "data" / "bandai"
 
-torch.set_num_threads(2)
+# mutmut forks a worker per mutant from a process that has run the tests: an OpenMP pool
+# started there deadlocks the children (every such mutant "timed out"), so one thread there
+torch.set_num_threads(1 if "MUTANT_UNDER_TEST" in os.environ else 2)
 
 
 def _shared(scope: str):
