@@ -349,7 +349,10 @@ def test_sampler_with_oracle_recovers_data(layout: Layout, stages: int) -> None:
 
 def test_sampler_steps_and_determinism() -> None:
     cfg = PyramidConfig(layout="2d")
-    assert default_steps(2) == (45, 5)
+    assert default_steps(2) == (45, 5)  # the paper's split
+    assert default_steps(1) == (50,) and default_steps(1, 7) == (7,)
+    assert default_steps(2, 9) == (5, 4)  # not 50 steps: an even split, coarse first
+    assert default_steps(3) == (17, 17, 16) and default_steps(4, 10) == (3, 3, 2, 2)
 
     def v(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor, scale: float) -> torch.Tensor:
         return -scale * x

@@ -156,3 +156,52 @@ def test_bodies_shapes_and_frames():
         K.Bodies(b.offsets, b.rotations[:, :5], b.root)
     with pytest.raises(ValueError):
         K.fit_bodies(np.zeros((5, 22, 3)))
+
+
+def test_ancestry_masks_follow_the_smpl_tree():
+    """Written out from SMPL-22's tree: which joints a driver's rotation moves (the
+    Jacobian's mask) and which drivers a driver's world rotation composes."""
+    below, upto = K._ancestry()
+    drivers = list(K.DRIVERS)
+    assert drivers == [0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 12, 13, 14, 16, 17, 18, 19]  # not leaves
+    moved = {0: set(range(1, 22)), 9: {12, 13, 14, 15, 16, 17, 18, 19, 20, 21},
+             1: {4, 7, 10}, 4: {7, 10}, 7: {10}, 16: {18, 20}, 18: {20}, 12: {15}}  # fmt: skip
+    for j, joints in moved.items():
+        assert set(np.flatnonzero(below[:, drivers.index(j)])) == joints, j
+    parents = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19]
+    depth = [0] * 22
+    for k in range(1, 22):
+        depth[k] = depth[parents[k]] + 1
+    assert below.sum() == sum(depth)  # each joint is below each of its ancestors, once
+    assert upto.sum() == sum(depth[j] + 1 for j in drivers)
+    chains = {0: {0}, 9: {0, 3, 6, 9}, 19: {0, 3, 6, 9, 14, 17, 19}, 7: {0, 1, 4, 7}}
+    for j, above in chains.items():
+        assert {drivers[a] for a in np.flatnonzero(upto[:, drivers.index(j)])} == above, j
+    np.testing.assert_array_equal(K._BELOW, below)
+    np.testing.assert_array_equal(K._UPTO, upto)
+
+
+def test_bodies_frames_and_person_are_copied_slices():
+    rng = np.random.default_rng(0)
+    rot = np.tile(np.eye(3), (2, 10, 22, 1, 1)) + rng.normal(0, 1e-3, (2, 10, 22, 3, 3))
+    bodies = K.Bodies(rng.normal(size=(2, 22, 3)), rot, rng.normal(size=(2, 10, 3)))
+    part = bodies.frames(7, 2)
+    np.testing.assert_array_equal(part.rotations, bodies.rotations[:, 2:7])
+    np.testing.assert_array_equal(part.root, bodies.root[:, 2:7])
+    np.testing.assert_array_equal(part.offsets, bodies.offsets)
+    part.offsets[:] = 0.0
+    part.root[:] = 0.0
+    part.rotations[:] = 0.0
+    assert bodies.offsets.any() and bodies.root[:, 2:7].any() and bodies.rotations.any()
+    head = bodies.frames(4)
+    assert head.num_frames == 4 and head.num_people == 2
+    np.testing.assert_array_equal(head.root, bodies.root[:, :4])
+    one = bodies.person(1)
+    assert one.num_people == 1
+    np.testing.assert_array_equal(one.root, bodies.root[1:2])
+    np.testing.assert_array_equal(one.offsets, bodies.offsets[1:2])
+    np.testing.assert_array_equal(one.rotations, bodies.rotations[1:2])
+    with pytest.raises(ValueError, match="inconsistent bodies"):
+        K.Bodies(bodies.offsets, bodies.rotations[:, :9], bodies.root)
+    with pytest.raises(ValueError, match="inconsistent bodies"):
+        K.Bodies(bodies.offsets[:1], bodies.rotations, bodies.root)

@@ -282,12 +282,6 @@ class PyramidConfig:
         """Token count at ``stage`` (1 = full resolution)."""
         return self.num_tokens // self.block ** (stage - 1)
 
-    def down(self, x: Tensor, levels: int = 1) -> Tensor:
-        return down(x, self.layout, levels)
-
-    def up(self, x: Tensor, levels: int = 1) -> Tensor:
-        return up(x, self.layout, levels)
-
 
 # --------------------------------------------------------------------- training
 @dataclass(frozen=True)
