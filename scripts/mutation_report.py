@@ -141,11 +141,10 @@ def markdown(modules: dict, diffs: dict[str, str]) -> str:
     lines = ["# Mutation score (`make mutation`)", "",
              "mutmut 3 over the modules of `[tool.mutmut]` in `pyproject.toml`, each mutant "
              "run against the tests that cover it. The end-to-end tests (`test_pipeline`, "
-             "`test_reroll`, `test_exports_agree`: 15-60 s a run) run only for mutants of "
-             "`umf.pipeline` (and `umf.exports` for the agreement tests; `END_TO_END` in "
-             "`tests/conftest.py`), so elsewhere a score is a lower bound on what `make test` "
-             "catches. Score: killed (timeouts included) over the mutants run, equivalent "
-             "ones left out.", "",
+             "`test_reroll`, `test_exports_agree`: 8-60 s a run) run only for mutants of "
+             "`umf.pipeline` (`END_TO_END` in `tests/conftest.py`), so elsewhere a score is "
+             "a lower bound on what `make test` catches. Score: killed (timeouts included) "
+             "over the mutants run, equivalent ones left out.", "",
              "| module | mutants run | killed | timeout | survived | no tests | equivalent "
              "| score |", "|---|---:|---:|---:|---:|---:|---:|---:|"]  # fmt: skip
     for name, m in modules.items():

@@ -85,8 +85,7 @@ def test_end_to_end_tests_run_only_for_their_own_modules_mutants():
         return [Path(i.fspath).name for i in mutation_scope(items, mutant)[0]]
 
     assert kept("umf.flows.paths.x_expand_time__mutmut_4") == ["test_flow_paths.py"]
-    assert kept("umf.exports.gltf.x__box__mutmut_3") == ["test_flow_paths.py",
-                                                         "test_exports_agree.py"]  # fmt: skip
+    assert kept("umf.exports.gltf.x__box__mutmut_3") == ["test_flow_paths.py"]
     everything = ["test_flow_paths.py", "test_pipeline.py", "test_exports_agree.py"]
     assert kept("umf.pipeline.x_clean_up__mutmut_1") == everything
     assert kept("stats") == kept("") == everything  # mutmut's stats run, plain pytest
