@@ -323,3 +323,30 @@ def test_split_ids_stay_inside_the_dataset(humanml_root: Path, entry: str) -> No
     (humanml_root / "train.txt").write_bytes(b"\xff\xfe000001\n")
     with pytest.raises(UMFError, match="UTF-8"):
         list(load_humanml3d(humanml_root, problems=[]))
+
+
+def test_export_writes_each_person_at_20_fps_on_the_scenes_floor(real_joints, tmp_path):
+    """One file per person (``{i}`` counts from 1), the prompt beside the vectors, the
+    scene's floor (``meta["floor"]``) at y = 0, else each person's lowest joint."""
+    from umf.exports.humanml3d import person_arrays, write
+    from umf.pipeline import Scene
+
+    walk = real_joints.numpy()[:90]  # 3 s at 30 fps
+    joints = np.stack([walk, walk + np.array([2.0, 0.25, 0.0])]).astype(np.float32)
+    scene = Scene(joints, None, "two walkers", 30.0, meta={"floor": -0.1}, fit=False)
+    paths = write(scene, tmp_path / "walk-p{i}.npz")
+    assert [p.name for p in paths] == ["walk-p1.npz", "walk-p2.npz"]
+    lowest = joints[..., 1].min(axis=(1, 2))
+    for person, path in enumerate(paths):
+        data = np.load(path)
+        assert set(data.files) == {"new_joint_vecs", "new_joints", "text", "fps"}
+        assert str(data["text"]) == "two walkers" and float(data["fps"]) == 20.0
+        vecs, canon = data["new_joint_vecs"], data["new_joints"]
+        assert canon.shape == (60, 22, 3) and vecs.shape == (59, 263)  # 3 s at 20 fps
+        np.testing.assert_allclose(canon[..., 1].min(), lowest[person] + 0.1, atol=2e-3)
+        back = recover_joints(torch.from_numpy(vecs).double()).numpy()
+        np.testing.assert_allclose(back, canon[:-1], atol=1e-3)
+    own = person_arrays(joints[1], 30.0, floor=None)["new_joints"]
+    assert abs(own[..., 1].min()) < 2e-3  # no floor given: the person's lowest joint
+    with pytest.raises(ValueError, match="at least 2 frames at 20 fps"):
+        person_arrays(joints[0, :1], 30.0, floor=None)
