@@ -55,3 +55,43 @@ def test_residual_is_zero_on_smpl_proportions_and_bounded_on_ours(real_joints):
     res = mapping_residual(ours.bodies, 0)
     assert 0.005 < res.mean() < 0.04 and res.max() < 0.08
     assert res[:, 0].max() == pytest.approx(0.0, abs=1e-9)  # the pelvis is placed exactly
+
+
+def test_rest_corrections_turn_smpls_bones_onto_ours():
+    """C_j takes SMPL's rest direction of each child bone onto ours: exactly for one child,
+    best-fit for several (pelvis, chest), the parent's for leaves; all proper rotations;
+    the identity on SMPL's own proportions."""
+    from umf.exports.smpl import rest_corrections, smpl_directions
+    from umf.skeleton import DEFAULT_OFFSETS
+
+    ours = np.asarray(DEFAULT_OFFSETS, dtype=np.float64)
+    parents = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19]
+    children = {j: [k for k in range(22) if parents[k] == j] for j in range(22)}
+    smpl = smpl_directions(ours)
+    np.testing.assert_allclose(np.linalg.norm(smpl, axis=1), np.linalg.norm(ours, axis=1))
+    template = SMPL_OFFSETS[:22]
+    for k in range(1, 22):  # SMPL's direction, our length
+        unit = template[k] / np.linalg.norm(template[k])
+        np.testing.assert_allclose(smpl[k], unit * np.linalg.norm(ours[k]), atol=1e-12)
+    corr = rest_corrections(ours)
+    assert corr.shape == (22, 3, 3)
+    np.testing.assert_allclose(corr @ corr.transpose(0, 2, 1), np.tile(np.eye(3), (22, 1, 1)),
+                               atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(np.linalg.det(corr), 1.0, atol=1e-9)
+    for j in range(22):
+        kids = children[j]
+        if len(kids) == 1:
+            np.testing.assert_allclose(corr[j] @ smpl[kids[0]], ours[kids[0]], atol=1e-9)
+        elif kids:  # no other rotation brings the children closer
+            fit = np.linalg.norm(smpl[kids] @ corr[j].T - ours[kids])
+            for angle in (0.02, -0.02):
+                for axis in np.eye(3):
+                    c, s = np.cos(angle), np.sin(angle)
+                    k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]],
+                                  [-axis[1], axis[0], 0]])  # fmt: skip
+                    turn = np.eye(3) + s * k + (1 - c) * k @ k
+                    assert fit <= np.linalg.norm(smpl[kids] @ (turn @ corr[j]).T - ours[kids])
+        else:
+            np.testing.assert_array_equal(corr[j], corr[parents[j]])
+    np.testing.assert_allclose(rest_corrections(template.copy()),
+                               np.tile(np.eye(3), (22, 1, 1)), atol=1e-9)  # fmt: skip
