@@ -87,6 +87,41 @@ def test_npz_reads_back_as_the_same_scene(real_joints, tmp_path):
     assert np.abs(back.joints - scene.joints).max() < 1e-5
 
 
+@pytest.mark.parametrize("generated", [True, False])
+def test_npz_holds_every_documented_array(real_joints, tmp_path, generated):
+    """The keys exports/npz.py documents, float32, with their values: a generated scene
+    (features, seed, coverage) and a motion file's (none of them; seed -1)."""
+    import json
+
+    from umf.version import __version__
+
+    joints = np.stack([real_joints.numpy()[:20], real_joints.numpy()[:20] + 2.0])
+    features = np.random.default_rng(0).normal(size=(2, 20, 262)) if generated else None
+    meta = {"coverage": {"known": 0.75, "nearest": "a walk"}} if generated else {}
+    scene = Scene(joints.astype(np.float32), features, "two walks", 30.0,
+                  seed=12 if generated else None, model="m-1" if generated else "",
+                  meta=meta)  # fmt: skip
+    data = np.load(scene.save_npz(tmp_path / "s.npz"))
+    arrays = ["joints", "raw_joints", "offsets", "rotations", "root", "fps"]
+    optional = ["features", "coverage"] if generated else []
+    assert set(data.files) == {*arrays, "text", "seed", "model_version", "umf_version",
+                               *optional}  # fmt: skip
+    for key in arrays + optional[:1]:
+        assert data[key].dtype == np.float32, key
+    bodies = scene.rigid().bodies
+    np.testing.assert_array_equal(data["joints"], scene.joints.astype(np.float32))
+    np.testing.assert_allclose(data["raw_joints"], scene.raw_joints, atol=1e-6)
+    np.testing.assert_allclose(data["offsets"], bodies.offsets, atol=1e-6)
+    np.testing.assert_allclose(data["rotations"], bodies.rotations, atol=1e-6)
+    np.testing.assert_allclose(data["root"], bodies.root, atol=1e-6)
+    assert float(data["fps"]) == 30.0 and str(data["text"]) == "two walks"
+    assert int(data["seed"]) == (12 if generated else -1)
+    assert str(data["model_version"]) == scene.model and str(data["umf_version"]) == __version__
+    if generated:
+        np.testing.assert_allclose(data["features"], features, atol=1e-6)
+        assert json.loads(str(data["coverage"])) == meta["coverage"]
+
+
 def test_save_pretrained_round_trip(tmp_path, fake_text):
     from umf.pipeline import UMFPipeline
 
