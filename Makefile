@@ -54,7 +54,7 @@ bench: $(STAMP)
 mutation: $(STAMP)
 	$(BIN)/pip install --quiet -c requirements.lock -e ".[mutation]"
 	rm -rf mutants
-	PYTHONPATH=src OMP_NUM_THREADS=1 $(BIN)/mutmut run
+	PYTHONPATH=src OMP_NUM_THREADS=1 UMF_GLTF_VALIDATOR=$(abspath $(VENV))/node $(BIN)/mutmut run
 	PATH=$(abspath $(BIN)):$$PATH $(BIN)/python scripts/mutation_report.py --out results/mutation
 
 # The full corpus: Bandai from ../shared/data/bandai (or BANDAI=...), and where ../shared is
