@@ -192,3 +192,67 @@ def test_reaction_noise_starts_the_reaction_half_near_the_context() -> None:
     oracle = sample_semi_noise(_state_oracle(c, w), c, steps=10, reaction_noise=0.5,
                                generator=torch.Generator().manual_seed(5))  # fmt: skip
     torch.testing.assert_close(oracle.x, w, atol=1e-5, rtol=0)  # still ends at W
+
+
+# ------------------------------------------------------------ draws, dtypes, loss terms
+F64 = torch.float64
+
+
+def _twin(seed: int) -> tuple[torch.Generator, torch.Generator]:
+    return torch.Generator().manual_seed(seed), torch.Generator().manual_seed(seed)
+
+
+@pytest.mark.parametrize("reaction_only", [False, True])
+def test_training_sample_draws_t_then_eps_then_eps_prime_in_the_contexts_dtype(reaction_only):
+    """The documented order of draws from one generator (t, eps, eps'), the reaction half
+    from C + sigma * eps', float64 in and out, the time distribution's own defaults."""
+    from umf.flows.paths import sample_time
+
+    context = torch.randn(3, 4, 5, dtype=F64)
+    reaction = torch.randn(3, 4, 5, dtype=F64)
+    mine, twin = _twin(7)
+    got = semi_noise_training_sample(context, reaction, reaction_only=reaction_only,
+                                     generator=mine, time_distribution="logit_normal",
+                                     reaction_noise=0.3)  # fmt: skip
+    t = sample_time(3, distribution="logit_normal", loc=0.0, scale=1.0, generator=twin, dtype=F64)
+    eps = torch.randn(context.shape, generator=twin, dtype=F64)
+    start = context + 0.3 * torch.randn(context.shape, generator=twin, dtype=F64)
+    want = semi_noise_state(context, reaction, eps, t, reaction_only=reaction_only,
+                            reaction_start=start)  # fmt: skip
+    assert got.x.dtype == got.t.dtype == got.target.dtype == F64
+    for a, b in ((got.x, want.x), (got.t, want.t), (got.target, want.target)):
+        torch.testing.assert_close(a, b, atol=0, rtol=0)
+
+
+def test_initial_state_and_one_step_start_at_noise_and_c_plus_sigma_eps_prime():
+    context = torch.randn(2, 4, 6, dtype=F64)
+    mine, twin = _twin(11)
+    x0 = semi_noise_initial_state(context, generator=mine, reaction_noise=0.2)
+    eps = torch.randn(context.shape, generator=twin, dtype=F64)
+    start = context + 0.2 * torch.randn(context.shape, generator=twin, dtype=F64)
+    assert x0.dtype == F64
+    torch.testing.assert_close(x0, torch.cat([eps, start], dim=-1), atol=0, rtol=0)
+    given = torch.randn(context.shape, dtype=F64)  # a noise passed in is used as is
+
+    def still(x, t):
+        return torch.zeros_like(x)
+
+    mine, twin = _twin(5)
+    out = sample_semi_noise(still, context, steps=1, noise=given, generator=mine,
+                            reaction_noise=0.5)  # fmt: skip
+    eps_prime = torch.randn(context.shape, generator=twin, dtype=F64)  # no eps drawn: given
+    torch.testing.assert_close(out.x, context + 0.5 * eps_prime, atol=0, rtol=0)
+
+
+def test_loss_weighs_reconstruction_by_lambda_and_honours_the_mask():
+    pred, target = torch.randn(2, 4, 6), torch.randn(2, 4, 6)
+    mask = torch.tensor([[True, True, False, False], [True, True, True, False]])
+    wild = pred.clone()
+    wild[~mask] = 1e6  # what padded tokens hold must not count
+    plain = semi_noise_loss(pred, target, mask=mask)
+    torch.testing.assert_close(plain.total, plain.reaction + plain.recon)  # lambda 1 default
+    assert semi_noise_loss(wild, target, mask=mask).total == plain.total
+    half = semi_noise_loss(pred, target, lambda_recon=0.5, mask=mask)
+    torch.testing.assert_close(half.total, plain.reaction + 0.5 * plain.recon)
+    only = semi_noise_loss(wild[..., :3], target[..., :3], reaction_only=True, mask=mask)
+    assert only.reaction == only.total < 1e3 and only.recon == 0
