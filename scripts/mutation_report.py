@@ -17,6 +17,7 @@ import argparse
 import ast
 import difflib
 import json
+import re
 import sys
 from pathlib import Path
 
@@ -80,7 +81,7 @@ def read_results(mutants: Path) -> dict[str, int | None]:
 
 
 def score(codes: dict[str, int | None], diffs: dict[str, str] | None = None,
-          equivalent: dict = EQUIVALENT) -> dict:
+          equivalent: dict = EQUIVALENT, originals: dict[str, str] | None = None) -> dict:
     """Per module: counts by outcome, equivalents among the survivors (matched on their
     function and changed line, ``diffs``), and the score."""
     diffs = diffs or {}
@@ -93,6 +94,9 @@ def score(codes: dict[str, int | None], diffs: dict[str, str] | None = None,
         reason = None
         if kind == "survived":
             reason = equivalent.get((function_of(name), diffs.get(name, "")))
+            if reason is None and device_only((originals or {}).get(name, ""),
+                                              diffs.get(name, "")):  # fmt: skip
+                reason = f"a device argument: {CPU}"
         if reason is not None:
             m["equivalent"] += 1
             m.setdefault("equivalents", {})[name] = reason
@@ -122,6 +126,32 @@ def mutant_sources(mutants: Path) -> dict[str, str]:
                     "__mutmut_" in node.name):  # fmt: skip
                 sources[f"{module}.{node.name}"] = ast.get_source_segment(text, node) or ""
     return sources
+
+
+_DEVICE_ARG = re.compile(r"device=[^,()]*(\([^()]*\))?")
+
+
+def device_only(original: str, mutated: str) -> bool:
+    """True when two lines differ only in a ``device=`` argument (set to None or dropped):
+    on a CPU-only machine every tensor is on the default device anyway."""
+    if "device=" not in original:
+        return False
+
+    def plain(line: str) -> str:
+        line = _DEVICE_ARG.sub("", line).replace(" ", "")
+        return re.sub(r",+", ",", line).replace(",)", ")").replace("(,", "(")
+
+    return plain(original) == plain(mutated)
+
+
+def original_line(mutant: str, sources: dict[str, str]) -> str:
+    """The original line the mutant changed, stripped ('' when it cannot be told)."""
+    mine = sources.get(mutant, "").splitlines()[1:]
+    orig = sources.get(function_of(mutant) + "__mutmut_orig", "").splitlines()[1:]
+    for line in difflib.ndiff(orig, mine):
+        if line.startswith("- "):
+            return line[2:].strip()
+    return ""
 
 
 def changed_line(mutant: str, sources: dict[str, str]) -> str:
@@ -176,7 +206,8 @@ def main() -> None:
     sources = mutant_sources(args.mutants)
     diffs = {name: changed_line(name, sources) for name, code in codes.items()
              if classify(code) in ("survived", "no tests")}  # fmt: skip
-    modules = score(codes, diffs)
+    originals = {name: original_line(name, sources) for name in diffs}
+    modules = score(codes, diffs, originals=originals)
     args.out.mkdir(parents=True, exist_ok=True)
     report = {"modules": modules, "diffs": diffs}
     (args.out / "mutation.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -89,3 +89,15 @@ def test_end_to_end_tests_run_only_for_their_own_modules_mutants():
     everything = ["test_flow_paths.py", "test_pipeline.py", "test_exports_agree.py"]
     assert kept("umf.pipeline.x_clean_up__mutmut_1") == everything
     assert kept("stats") == kept("") == everything  # mutmut's stats run, plain pytest
+
+
+def test_a_device_argument_set_to_none_or_dropped_is_equivalent_on_the_cpu():
+    report = load_script("mutation_report")
+    same = report.device_only
+    line = "eps = torch.randn(z1.shape, generator=generator, device=z1.device, dtype=z1.dtype)"
+    assert same(line, line.replace("device=z1.device", "device=None"))
+    assert same(line, line.replace(" device=z1.device,", ""))
+    assert same("x = torch.zeros(b, p, device=z.device)", "x = torch.zeros(b, p, )")
+    assert not same(line, line.replace("dtype=z1.dtype", "dtype=None"))
+    assert not same(line, line.replace("generator=generator", "generator=None"))
+    assert not same("t = a + b", "t = a - b")
