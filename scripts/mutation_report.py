@@ -45,6 +45,53 @@ EQUIVALENT: dict[tuple[str, str], str] = {
      "z = torch.randn(batch, generator=generator, dtype=dtype)"): f"device dropped: {CPU}",
     ("umf.flows.paths.x_flow_matching_loss", "m = mask.to(None)"):
         "mask.to(None) keeps the bool mask: bool x float multiplies and sums the same",
+    # glTF export
+    ("umf.exports.gltf.x__box",
+     "if sign <= 0:  # keep t1 x t2 = n so the winding faces outwards"):
+        "sign is 1.0 or -1.0: <= 0 picks the same faces as < 0",
+    ("umf.exports.gltf.x__box",
+     "if sign < 1:  # keep t1 x t2 = n so the winding faces outwards"):
+        "sign is 1.0 or -1.0: < 1 picks the same faces as < 0",
+    ("umf.exports.gltf.x__as_bodies",
+     "if joints.ndim != 4 or joints.shape[2:] != (NUM_JOINTS, 3) or 0 in joints.shape[:3]:"):
+        "shape[2] is 22 by the clause before it",
+    ("umf.exports.gltf.x__bone_axes",
+     "ref = np.array([0.0, 0.0, 2.0]) if abs(a[2]) < 0.9 else np.array([1.0, 0.0, 0.0])"):
+        "u is normalised: a longer reference along the same axis gives the same u",
+    ("umf.exports.gltf.x__bone_axes",
+     "ref = np.array([0.0, 0.0, 1.0]) if abs(a[2]) < 0.9 else np.array([2.0, 0.0, 0.0])"):
+        "u is normalised: a longer reference along the same axis gives the same u",
+    ("umf.exports.gltf.x__bone_axes",
+     "ref = np.array([0.0, 0.0, 1.0]) if abs(a[2]) <= 0.9 else np.array([1.0, 0.0, 0.0])"):
+        "differs only for a bone exactly 0.9 along z, where both references work",
+    ("umf.exports.gltf.x\u01c1_Packer\u01c1add",
+     "flat = np.ascontiguousarray(array).reshape(len(array), -2)"):
+        "numpy reads any negative size as 'the rest', like -1",
+    ("umf.exports.gltf.x_scene_to_gltf",
+     "gl.AnimationSampler(input=time_accessor, output=out, interpolation=None)"):
+        "glTF's default interpolation is LINEAR, which pygltflib then writes",
+    ("umf.exports.gltf.x_scene_to_gltf",
+     "gl.AnimationSampler(input=time_accessor, output=out, )"):
+        "glTF's default interpolation is LINEAR, which pygltflib then writes",
+    ("umf.exports.gltf.x_continuous_quaternions",
+     "sign = np.concatenate([np.ones_like(q[:1, ..., 0]), 1.0 - 2.0 * parity], )"):
+        "axis 0 is numpy's default",
+    ("umf.exports.gltf.x_continuous_quaternions",
+     "sign = np.concatenate([np.ones_like(q[:1, ..., 1]), 1.0 - 2.0 * parity], axis=0)"):
+        "ones_like of any component is the same ones",
+    ("umf.exports.gltf.x_continuous_quaternions", "return q / sign[..., None]"):
+        "sign is +1 or -1: dividing is multiplying",
+    ("umf.exports.gltf.x_continuous_quaternions",
+     "negative = np.sum(q[1:] * q[:-1], axis=-1) <= 0"):
+        "differs only for consecutive keys exactly 180 degrees apart, either sign is right",
+    ("umf.exports.gltf.x_person_colour",
+     "linear = np.where(srgb < 0.04045, srgb / 12.92, ((srgb + 0.055) / 1.055) ** 2.4)"):
+        "no palette channel, nor a darker round of one, is exactly 0.04045",
+    # kinematics
+    ("umf.kinematics.x__ancestry", "while a >= 1 and a != j:"):
+        "at the pelvis (0) the walk up has met j or never will: stopping there answers alike",
+    ("umf.kinematics.x__ancestry", "while a > 0 and a != j:"):
+        "at the pelvis (0) the walk up has met j or never will: stopping there answers alike",
 }  # fmt: skip
 
 
