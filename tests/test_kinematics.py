@@ -205,3 +205,17 @@ def test_bodies_frames_and_person_are_copied_slices():
         K.Bodies(bodies.offsets, bodies.rotations[:, :9], bodies.root)
     with pytest.raises(ValueError, match="inconsistent bodies"):
         K.Bodies(bodies.offsets[:1], bodies.rotations, bodies.root)
+
+
+def test_pin_runs_on_a_hand_made_contact_sequence():
+    """Runs start at planted frames (frame 0 too), end where contact ends or the decoded
+    foot slides past ``reach`` (inclusive), and a let-go pin waits ``gap`` frames."""
+    planted = np.array([1, 1, 0, 1, 1, 1, 1, 1, 1, 0, 1], dtype=bool)
+    x = np.array([0, 0, 0, 0, 0.05, 0.1, 0.2, 0.21, 0.22, 0, 0], dtype=float)
+    path = np.stack([x, np.zeros_like(x), np.zeros_like(x)], axis=1)
+    # 0-1 planted; 3-5 within 0.1 of frame 3 (0.1 exactly counts), 6 slides past: let go
+    # for 2 frames (6, 7), pinned again at 8 until contact ends at 9; 10 planted to the end
+    assert K.pin_runs(path, planted, reach=0.1, gap=2) == [(0, 2), (3, 6), (8, 9), (10, 11)]
+    assert K.pin_runs(path, planted, reach=0.1, gap=1) == [(0, 2), (3, 6), (7, 9), (10, 11)]
+    assert K.pin_runs(path, np.zeros(11, dtype=bool)) == []
+    assert K.pin_runs(path, np.ones(11, dtype=bool), reach=1.0) == [(0, 11)]
