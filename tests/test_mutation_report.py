@@ -101,3 +101,13 @@ def test_a_device_argument_set_to_none_or_dropped_is_equivalent_on_the_cpu():
     assert not same(line, line.replace("dtype=z1.dtype", "dtype=None"))
     assert not same(line, line.replace("generator=generator", "generator=None"))
     assert not same("t = a + b", "t = a - b")
+
+
+def test_each_named_mutation_still_finds_its_line_once():
+    """scripts/named_mutations.py edits exact lines; a refactor that moves one must fail
+    here, not leave the script testing nothing."""
+    named = load_script("named_mutations")
+    assert len(named.MUTATIONS) == 9
+    for m in named.MUTATIONS:
+        assert (named.REPO / m.path).read_text().count(m.before) == 1, m.name
+        assert all((named.REPO / t).is_file() for t in m.tests), m.name
