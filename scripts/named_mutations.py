@@ -18,14 +18,13 @@ import shutil
 import subprocess
 import sys
 import tempfile
-from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple
 
 REPO = Path(__file__).resolve().parents[1]
 
 
-@dataclass(frozen=True)
-class Mutation:
+class Mutation(NamedTuple):
     name: str
     path: str
     before: str
