@@ -193,27 +193,26 @@ def device_only(original: str, mutated: str) -> bool:
     return plain(original) == plain(mutated)
 
 
-def original_line(mutant: str, sources: dict[str, str]) -> str:
-    """The original line the mutant changed, stripped ('' when it cannot be told)."""
-    mine = sources.get(mutant, "").splitlines()[1:]
-    orig = sources.get(function_of(mutant) + "__mutmut_orig", "").splitlines()[1:]
-    for line in difflib.ndiff(orig, mine):
-        if line.startswith("- "):
-            return line[2:].strip()
-    return ""
-
-
-def changed_line(mutant: str, sources: dict[str, str]) -> str:
-    """The first line of a mutant's function that differs from the original's, stripped;
-    '' when it cannot be told (the mutated copies are gone)."""
+def changed_pair(mutant: str, sources: dict[str, str]) -> tuple[str, str]:
+    """(original, mutated) first differing line of a mutant's function, stripped; '' for
+    what cannot be told (the mutated copies are gone), "(a line removed)" as the mutated
+    side of a deletion."""
     mine = sources.get(mutant, "").splitlines()[1:]
     orig = sources.get(function_of(mutant) + "__mutmut_orig", "").splitlines()[1:]
     if not mine or not orig:
-        return ""
+        return "", ""
+    old = ""
     for line in difflib.ndiff(orig, mine):
-        if line.startswith("+ "):
-            return line[2:].strip()
-    return "(a line removed)" if len(mine) < len(orig) else ""
+        if line.startswith("- ") and not old:
+            old = line[2:].strip()
+        elif line.startswith("+ "):
+            return old, line[2:].strip()
+    return old, "(a line removed)" if len(mine) < len(orig) else ""
+
+
+def changed_line(mutant: str, sources: dict[str, str]) -> str:
+    """The first line of a mutant's function that differs from the original's, stripped."""
+    return changed_pair(mutant, sources)[1]
 
 
 def markdown(modules: dict, diffs: dict[str, str]) -> str:
@@ -253,9 +252,10 @@ def main() -> None:
     if not codes:
         sys.exit(f"error: no mutmut results under {args.mutants} (run `make mutation`)")
     sources = mutant_sources(args.mutants)
-    diffs = {name: changed_line(name, sources) for name, code in codes.items()
+    pairs = {name: changed_pair(name, sources) for name, code in codes.items()
              if classify(code) in ("survived", "no tests")}  # fmt: skip
-    originals = {name: original_line(name, sources) for name in diffs}
+    diffs = {name: new for name, (_, new) in pairs.items()}
+    originals = {name: old for name, (old, _) in pairs.items()}
     modules = score(codes, diffs, originals=originals)
     args.out.mkdir(parents=True, exist_ok=True)
     report = {"modules": modules, "diffs": diffs}
