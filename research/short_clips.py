@@ -4,7 +4,9 @@ A clip shorter than the shortest crop (``--min-frames`` feature frames) is held 
 pose (ends at rest), has its last cycle repeated (ends in a steady, straight gait) or is
 served as it is (``umf.train.datasets.extension_period``, the dataset's own choice). Prints
 one row per content label, then the seam and turn of the repeated cycles
-(``umf.train.datasets.last_cycle``) and the median length of each label's short clips.
+(``umf.train.datasets.last_cycle``), the median length of each label's short clips, and
+for every short clip served as it is the speeds that kept it from being held
+(``umf.train.datasets.end_speeds``: pelvis, left ankle and toe, right ankle and toe).
 
     python research/short_clips.py [--corpus out/corpus] [--split train] [--min-frames 140]
 """
@@ -17,17 +19,21 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from umf.train.datasets import extension_period, last_cycle
+from umf.train.datasets import REST_SPEED, end_speeds, extension_period, last_cycle
 
 KINDS = ("held", "cycle repeated", "as is")
 
 
-def classify(clips, min_frames: int) -> tuple[dict[str, Counter], list[tuple[float, float]], dict]:
+def classify(
+    clips, min_frames: int
+) -> tuple[dict[str, Counter], list[tuple[float, float]], dict, list[tuple[str, int, np.ndarray]]]:
     """Per label, how its short people are extended; (seam m, turn rad) of every repeated
-    cycle; per label, the lengths (frames) of its short people."""
+    cycle; per label, the lengths (frames) of its short people; (clip id, frames, end speeds)
+    of every short person served as it is."""
     kinds: dict[str, Counter] = defaultdict(Counter)
     seams: list[tuple[float, float]] = []
     lengths: dict[str, list[int]] = defaultdict(list)
+    as_is: list[tuple[str, int, np.ndarray]] = []
     for clip in clips:
         label = str(clip.meta.get("content", "?"))
         for joints in clip.joints:
@@ -36,10 +42,12 @@ def classify(clips, min_frames: int) -> tuple[dict[str, Counter], list[tuple[flo
             period = extension_period(joints, min_frames, hold_rest=True, repeat_gait=True)
             kinds[label][KINDS[2] if period is None else KINDS[0] if period == 0 else KINDS[1]] += 1
             lengths[label].append(len(joints))
+            if period is None:
+                as_is.append((clip.id, len(joints), end_speeds(joints)))
             if period:
                 _, seam, turn, _ = last_cycle(joints)
                 seams.append((seam, turn))
-    return kinds, seams, lengths
+    return kinds, seams, lengths, as_is
 
 
 def main() -> None:
@@ -51,7 +59,7 @@ def main() -> None:
     from umf.data.corpus import Corpus
 
     clips = Corpus.load(args.corpus).split_clips(args.split)
-    kinds, seams, lengths = classify(clips, args.min_frames)
+    kinds, seams, lengths, as_is = classify(clips, args.min_frames)
     people = sum(len(c.joints) for c in clips)
     total = Counter()
     for c in kinds.values():
@@ -76,6 +84,12 @@ def main() -> None:
             f"{s.max() * 100:.1f} cm; turn median {math.degrees(np.median(t)):.1f}, max "
             f"{math.degrees(t.max()):.1f} degrees"
         )
+    if as_is:
+        print(f"\nserved as they are (rest needs every speed under {REST_SPEED} m/s):")
+        print("| clip | frames | pelvis | l ankle | l toe | r ankle | r toe (m/s) |")
+        print("|---|---:|---:|---:|---:|---:|---:|")
+        for cid, frames, v in sorted(as_is):
+            print(f"| {cid} | {frames} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
 
 
 if __name__ == "__main__":

@@ -17,16 +17,19 @@ def test_short_clips_agrees_with_the_dataset(tmp_path, monkeypatch, capsys):
     lo = max(c.num_frames for c in clips)  # every clip is short
     ds = D.SingleMotionDataset(corpus, "train", None, lo, lo + 20, hold_rest=True,
                                repeat_gait=True)  # fmt: skip
-    kinds, seams, lengths = sc.classify(clips, lo)
+    kinds, seams, lengths, as_is = sc.classify(clips, lo)
     assert sum(c["held"] for c in kinds.values()) == sum(v == 0 for v in ds.extended.values())
     repeated = sum(c["cycle repeated"] for c in kinds.values())
     assert repeated == sum(v > 0 for v in ds.extended.values()) == len(seams) > 0
     assert sum(c["as is"] for c in kinds.values()) == len(ds.items) - len(ds.extended)
     assert all(seam <= D.GAIT_MATCH and turn < D.GAIT_TURN for seam, turn in seams)
     assert sum(map(len, lengths.values())) == len(ds.items)
+    assert len(as_is) == len(ds.items) - len(ds.extended) > 0  # each refused by the rest test
+    assert all(v.max() >= D.REST_SPEED for _, _, v in as_is)
     monkeypatch.setattr(sys, "argv", ["short_clips.py", "--corpus", str(tmp_path / "c"),
                                       "--min-frames", str(lo)])  # fmt: skip
     sc.main()
     out = capsys.readouterr().out
     assert f"train: {len(ds.items)} people, {len(ds.items)} shorter than" in out
     assert "| label | short | held | cycle repeated | as is |" in out
+    assert ("served as they are" in out) == bool(as_is)

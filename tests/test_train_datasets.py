@@ -275,10 +275,15 @@ def test_ends_at_rest_needs_a_still_pelvis_and_still_feet():
         moving = still.copy()
         moving[-11:, joints, 2] += np.arange(11)[:, None] * 0.01
         assert not D.ends_at_rest(moving), joints
+        speeds = D.end_speeds(moving)  # the one moving joint at 0.01 m x 30 fps, the rest ~0
+        k = D.REST_JOINTS.index(joints[0])
+        assert speeds[k] == pytest.approx(0.3, abs=0.01)
+        assert np.delete(speeds, k).max() < 0.01
     early = still.copy()  # moved before the last ten frames, still during them
     early[:-11, 0, 2] += np.arange(len(early) - 11) * 0.05
     assert D.ends_at_rest(early)
     assert not D.ends_at_rest(still[:1])
+    assert D.end_speeds(still[:1]).size == 0
 
 
 def test_hold_rest_serves_short_clips_at_rest_whole_then_held(corpus):

@@ -121,17 +121,27 @@ REST_FRAMES = 10  # the last frames of a clip that decide whether it ends at res
 REST_SPEED = 0.15  # m/s: pelvis and feet slower than this over them (a body not travelling)
 
 
+REST_JOINTS = (0, *FOOT_LEFT, *FOOT_RIGHT)  # pelvis, left ankle and toe, right ankle and toe
+
+
+def end_speeds(joints: np.ndarray, fps: float = FPS, frames: int = REST_FRAMES) -> np.ndarray:
+    """Mean speeds (m/s) of the :data:`REST_JOINTS` of one person's joints (T, 22, 3) over
+    its last ``frames`` frames; empty when the clip has fewer than two frames."""
+    j = np.asarray(joints, dtype=np.float64)[-(frames + 1) :, list(REST_JOINTS)]
+    if len(j) < 2:
+        return np.zeros(0)
+    return np.linalg.norm(np.diff(j, axis=0), axis=-1).mean(axis=0) * fps
+
+
 def ends_at_rest(
     joints: np.ndarray, fps: float = FPS, frames: int = REST_FRAMES, speed: float = REST_SPEED
 ) -> bool:
     """Whether one person's joints (T, 22, 3) end standing: the pelvis and both feet (ankles,
-    toes) move slower than ``speed`` on average over the last ``frames`` frames. The arms may
-    still move (the Bandai gestures are cut while the hands come down)."""
-    j = np.asarray(joints, dtype=np.float64)[-(frames + 1) :]
-    if len(j) < 2:
-        return False
-    body = j[:, [0, *FOOT_LEFT, *FOOT_RIGHT]]  # pelvis, ankles and toes
-    return bool(np.linalg.norm(np.diff(body, axis=0), axis=-1).mean(axis=0).max() * fps < speed)
+    toes) move slower than ``speed`` on average over the last ``frames`` frames
+    (:func:`end_speeds`). The arms may still move (the Bandai gestures are cut while the
+    hands come down)."""
+    v = end_speeds(joints, fps, frames)
+    return bool(v.size and v.max() < speed)
 
 
 GAIT_FRAMES = (15, 45)  # a gait cycle: 0.5 to 1.5 s at 30 fps
