@@ -1,14 +1,16 @@
-"""Which short training clips ``train_*.hold_rest`` and ``repeat_gait`` extend, per label.
+"""Which short training clips ``train_*.hold_rest``, ``repeat_gait`` and ``settle`` extend.
 
 A clip shorter than the shortest crop (``--min-frames`` feature frames) is held in its last
-pose (ends at rest), has its last cycle repeated (ends in a steady, straight gait) or is
+pose (ends at rest), has its last cycle repeated (ends in a steady, straight gait), is eased
+to a stop and held (ends slowly; only with ``--settle``, as ``train_*.settle``) or is
 served as it is (``umf.train.datasets.extension_period``, the dataset's own choice). Prints
 one row per content label, then the seam and turn of the repeated cycles
 (``umf.train.datasets.last_cycle``), the median length of each label's short clips, and
-for every short clip served as it is the speeds that kept it from being held
+for every short clip eased or served as it is the speeds that kept it from being held
 (``umf.train.datasets.end_speeds``: pelvis, left ankle and toe, right ankle and toe).
 
     python research/short_clips.py [--corpus out/corpus] [--split train] [--min-frames 140]
+        [--settle]
 """
 
 from __future__ import annotations
@@ -19,32 +21,47 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from umf.train.datasets import REST_SPEED, end_speeds, extension_period, last_cycle
+from umf.train.datasets import (
+    REST_SPEED,
+    SETTLE,
+    SETTLE_SPEED,
+    end_speeds,
+    extension_period,
+    last_cycle,
+)
 
-KINDS = ("held", "cycle repeated", "as is")
+KINDS = ("held", "cycle repeated", "eased to a stop", "as is")
+Unrested = tuple[str, int, str, np.ndarray]  # clip id, frames, kind, end speeds
+
+
+def kind(period: int | None) -> str:
+    """The :data:`KINDS` name of an extension period."""
+    if period is None:
+        return KINDS[3]
+    return KINDS[0] if period == 0 else KINDS[2] if period == SETTLE else KINDS[1]
 
 
 def classify(
-    clips, min_frames: int
-) -> tuple[dict[str, Counter], list[tuple[float, float]], dict, list[tuple[str, int, np.ndarray]]]:
+    clips, min_frames: int, settle: bool = False
+) -> tuple[dict[str, Counter], list[tuple[float, float]], dict, list[Unrested]]:
     """Per label, how its short people are extended; (seam m, turn rad) of every repeated
-    cycle; per label, the lengths (frames) of its short people; (clip id, frames, end speeds)
-    of every short person served as it is."""
+    cycle; per label, the lengths (frames) of its short people; (clip id, frames, kind, end
+    speeds) of every short person eased to a stop or served as it is."""
     kinds: dict[str, Counter] = defaultdict(Counter)
     seams: list[tuple[float, float]] = []
     lengths: dict[str, list[int]] = defaultdict(list)
-    as_is: list[tuple[str, int, np.ndarray]] = []
+    as_is: list[Unrested] = []
     for clip in clips:
         label = str(clip.meta.get("content", "?"))
         for joints in clip.joints:
             if len(joints) - 1 >= min_frames:
                 continue
-            period = extension_period(joints, min_frames, hold_rest=True, repeat_gait=True)
-            kinds[label][KINDS[2] if period is None else KINDS[0] if period == 0 else KINDS[1]] += 1
+            period = extension_period(joints, min_frames, True, True, settle)
+            kinds[label][kind(period)] += 1
             lengths[label].append(len(joints))
-            if period is None:
-                as_is.append((clip.id, len(joints), end_speeds(joints)))
-            if period:
+            if period is None or period == SETTLE:
+                as_is.append((clip.id, len(joints), kind(period), end_speeds(joints)))
+            if period and period > 0:
                 _, seam, turn, _ = last_cycle(joints)
                 seams.append((seam, turn))
     return kinds, seams, lengths, as_is
@@ -55,11 +72,12 @@ def main() -> None:
     ap.add_argument("--corpus", default="out/corpus")
     ap.add_argument("--split", default="train")
     ap.add_argument("--min-frames", type=int, default=140)
+    ap.add_argument("--settle", action="store_true", help="as train_*.settle: ease slow ends")
     args = ap.parse_args()
     from umf.data.corpus import Corpus
 
     clips = Corpus.load(args.corpus).split_clips(args.split)
-    kinds, seams, lengths, as_is = classify(clips, args.min_frames)
+    kinds, seams, lengths, as_is = classify(clips, args.min_frames, args.settle)
     people = sum(len(c.joints) for c in clips)
     total = Counter()
     for c in kinds.values():
@@ -85,11 +103,12 @@ def main() -> None:
             f"{math.degrees(t.max()):.1f} degrees"
         )
     if as_is:
-        print(f"\nserved as they are (rest needs every speed under {REST_SPEED} m/s):")
-        print("| clip | frames | pelvis | l ankle | l toe | r ankle | r toe (m/s) |")
-        print("|---|---:|---:|---:|---:|---:|---:|")
-        for cid, frames, v in sorted(as_is):
-            print(f"| {cid} | {frames} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
+        print(f"\nnot at rest (rest needs every speed under {REST_SPEED} m/s; easing to a stop, "
+              f"under {SETTLE_SPEED} m/s):")  # fmt: skip
+        print("| clip | frames | served | pelvis | l ankle | l toe | r ankle | r toe (m/s) |")
+        print("|---|---:|---|---:|---:|---:|---:|---:|")
+        for cid, frames, how, v in sorted(as_is, key=lambda row: row[:3]):
+            print(f"| {cid} | {frames} | {how} | " + " | ".join(f"{x:.2f}" for x in v) + " |")
 
 
 if __name__ == "__main__":

@@ -320,6 +320,76 @@ def test_hold_rest_serves_short_clips_at_rest_whole_then_held(corpus):
     assert len(lengths) > 1
 
 
+def test_settle_times_ease_the_last_frames_to_a_stop():
+    s = D.settle_times(20, 0, 40, frames=5)  # the last 5 frames (14..19) over 10, then held
+    np.testing.assert_array_equal(s[:15], np.arange(15))  # as it is up to the ease
+    assert s[24] == 19 and (s[24:] == 19).all()  # reaches the last frame, then holds
+    pace = np.diff(s)
+    assert pace[:14] == pytest.approx(1.0) and (pace[24:] == 0).all()
+    falling = pace[14:24]  # linear in time: each step 1/10 slower than the one before
+    np.testing.assert_allclose(np.diff(falling), -0.1, atol=1e-12)
+    assert falling[0] == pytest.approx(0.95) and falling[-1] == pytest.approx(0.05)
+    np.testing.assert_array_equal(D.settle_times(20, 5, 30, frames=5), s[5:30])  # a window
+    short = D.settle_times(4, 0, 12, frames=10)  # fewer frames than the ease: all of them
+    assert short[0] == 0 and short[6] == 3 and (np.diff(short) >= 0).all()
+    assert D.settle_times(1, 0, 3).tolist() == [0, 0, 0]
+
+
+def test_interpolate_frames_is_exact_on_frames_and_linear_between():
+    x = np.arange(5 * 2, dtype=np.float32).reshape(5, 2) ** 2
+    np.testing.assert_array_equal(D.interpolate_frames(x, np.array([0.0, 3.0, 4.0])), x[[0, 3, 4]])
+    mid = D.interpolate_frames(x, np.array([1.5, 3.25]))
+    np.testing.assert_allclose(mid, [(x[1] + x[2]) / 2, 0.75 * x[3] + 0.25 * x[4]])
+    assert mid.dtype == x.dtype
+
+
+def test_extension_period_settles_slow_ends_only():
+    still = _standing(60)
+    slow = still.copy()  # the pelvis still rising at 0.3 m/s over the last frames
+    slow[-11:, 0, 1] += np.arange(11) * 0.01
+    fast = still.copy()  # a foot still stepping at 1.5 m/s
+    fast[-11:, 7, 2] += np.arange(11) * 0.05
+    assert D.extension_period(slow, 100, True, True) is None  # settle off: as it is
+    assert D.extension_period(slow, 100, True, True, settle=True) == D.SETTLE
+    assert D.extension_period(fast, 100, True, True, settle=True) is None
+    assert D.extension_period(still, 100, True, True, settle=True) == 0  # at rest: held
+    assert D.extension_period(slow, 59, True, True, settle=True) is None  # long enough
+
+
+def test_settle_serves_slow_ending_clips_whole_then_eased_to_a_stop(corpus, monkeypatch):
+    monkeypatch.setattr(D, "SETTLE_SPEED", 100.0)  # every clip not at rest and not a gait
+    clips = {c.id: c for c in corpus.split_clips("train")}
+    longest = max(c.num_frames for c in clips.values())
+    lo, hi = longest + 2 * D.SETTLE_FRAMES + 10, longest + 2 * D.SETTLE_FRAMES + 40
+    plain = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False)
+    eased = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False, hold_rest=True,
+                                  settle=True)  # fmt: skip
+    settled = {k for k, v in eased.extended.items() if v == D.SETTLE}
+    assert settled and all(not D.ends_at_rest(clips[c].joints[p]) for c, p in settled)
+    for i, (clip, person, _) in enumerate(eased.items):
+        if (clip.id, person) not in settled:
+            continue
+        a, b = plain[i], eased[i]
+        n = clip.num_frames - 1
+        ease = n - D.SETTLE_FRAMES  # frames before it are the clip's own, untouched
+        assert b["start"] == 0 and lo <= b["length"] <= hi
+        f, g = b["features"].double(), a["features"].double()
+        torch.testing.assert_close(f[:ease, POS], g[:ease, POS])
+        torch.testing.assert_close(f[:ease, VEL], g[:ease, VEL])
+        torch.testing.assert_close(f[:ease, ROT], g[:ease, ROT], atol=1e-5, rtol=0)
+        # the pace falls to zero over twice the eased frames, then the last pose is held
+        speed = f[:, VEL].reshape(len(f), 22, 3).norm(dim=-1).max(dim=-1).values
+        end = ease + 2 * D.SETTLE_FRAMES
+        assert speed[end:].max() < 1e-6
+        assert (speed[end - 3 : end] < speed[ease : ease + 3].max() + 1e-9).all()
+        last = g[n - 1, POS] + g[n - 1, VEL]  # the clip's last pose: where the ease ends
+        torch.testing.assert_close(f[end, POS], last)
+        pos = f[end:, POS]
+        torch.testing.assert_close(pos, pos[:1].expand_as(pos))
+        rot = f[end:, ROT]
+        torch.testing.assert_close(rot, rot[:1].expand_as(rot))
+
+
 def test_repeat_gait_carries_short_walks_on(corpus):
     clips = {c.id: c for c in corpus.split_clips("train")}
     longest = max(c.num_frames for c in clips.values())

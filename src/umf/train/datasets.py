@@ -18,7 +18,9 @@ Frames of reference (decided here, used by every stage):
   (:func:`umf.data.scenes.time_layout`): ``hold_rest`` holds the last pose of a clip that
   ends with the body at rest (:func:`ends_at_rest`); ``repeat_gait`` repeats the last
   cycle of one that ends in a steady, straight gait (:func:`gait_period`), carried on along
-  the path it travelled. Other clips are served as they are.
+  the path it travelled; ``settle`` eases to a stop, then holds, one that ends slowly but
+  not yet at rest (a getup cut while the pelvis still rises: :func:`settle_times`). Other
+  clips are served as they are.
 * Mirroring (p = 0.5) flips the motion left/right and swaps the side words of the caption
   (:func:`mirror_caption`); a canonical crop stays canonical when mirrored.
 
@@ -52,6 +54,7 @@ from umf.representation import (
     mirror_features,
     place_features,
 )
+from umf.rotations import matrix_to_6d, sixd_to_matrix
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import swap_words, word_pattern
 from umf.train.batching import collate_scenes, collate_single
@@ -186,20 +189,53 @@ def gait_period(
     return lag if lag and seam <= match and turned < turn and travel >= speed else 0
 
 
+SETTLE = -1  # extension "period" of a clip whose end is eased to a stop, then held
+SETTLE_FRAMES = 10  # the last frames replayed at a pace falling to zero, over twice as many
+SETTLE_SPEED = 1.0  # m/s: the most end speed (:func:`end_speeds`) of a clip eased to a stop
+
+
 def extension_period(
-    joints: np.ndarray, min_frames: int, hold_rest: bool, repeat_gait: bool
+    joints: np.ndarray, min_frames: int, hold_rest: bool, repeat_gait: bool, settle: bool = False
 ) -> int | None:
     """How one person's clip (T, 22, 3) is extended to a crop of ``min_frames`` feature
-    frames: None (long enough, or neither option fits: served as it is), 0 (its last pose
-    held: ``hold_rest`` and :func:`ends_at_rest`) or P (its last P frames repeated:
-    ``repeat_gait`` and :func:`gait_period`)."""
+    frames: None (long enough, or no option fits: served as it is), 0 (its last pose
+    held: ``hold_rest`` and :func:`ends_at_rest`), P (its last P frames repeated:
+    ``repeat_gait`` and :func:`gait_period`) or :data:`SETTLE` (its end eased to a stop,
+    then held: ``settle`` and every end speed under :data:`SETTLE_SPEED`; a clip cut while
+    the body still settles, e.g. DeepMimic's getups, which end with the pelvis rising)."""
     if len(joints) - 1 >= min_frames:
         return None
     if hold_rest and ends_at_rest(joints):
         return 0
     if repeat_gait and (period := gait_period(joints)):
         return period
+    if settle and (v := end_speeds(joints)).size and v.max() < SETTLE_SPEED:
+        return SETTLE
     return None
+
+
+def settle_times(num_frames: int, start: int, stop: int, frames: int = SETTLE_FRAMES) -> np.ndarray:
+    """Source times (fractional frames) of frames ``start .. stop - 1`` of a clip of
+    ``num_frames`` frames eased to a stop: played as it is up to its last ``frames`` frames,
+    which then take twice as many frames at a pace falling linearly from 1 to 0 (the
+    velocity is continuous and ends at zero), then its last frame held. Only real poses and
+    poses between neighbouring real frames are served; nothing is extrapolated."""
+    t = np.arange(start, stop, dtype=np.float64)
+    k = min(frames, num_frames - 1)
+    if k <= 0:
+        return np.minimum(t, num_frames - 1)
+    ease = num_frames - 1 - k  # the frame where the pace starts to fall
+    u = np.clip(t - ease, 0.0, 2.0 * k)
+    return np.where(t <= ease, t, ease + u - u * u / (4.0 * k))
+
+
+def interpolate_frames(x: np.ndarray, times: np.ndarray) -> np.ndarray:
+    """``x`` (T, ...) at fractional frame ``times``: linear between the neighbouring frames."""
+    x = np.asarray(x)
+    lo = np.clip(np.floor(times).astype(np.int64), 0, len(x) - 1)
+    hi = np.minimum(lo + 1, len(x) - 1)
+    w = (np.asarray(times) - lo).reshape(-1, *([1] * (x.ndim - 1)))
+    return (x[lo] * (1.0 - w) + x[hi] * w).astype(x.dtype)
 
 
 def extended_frames(
@@ -251,12 +287,22 @@ def _clip_crop(
     period: int = 0,
 ):
     """Features (len(people), length, 262) of a crop, in the clip's floored frame; frames
-    past the clip's end hold its last pose (``period`` 0) or repeat its last ``period``."""
+    past the clip's end hold its last pose (``period`` 0), repeat its last ``period`` or,
+    for :data:`SETTLE`, follow its end eased to a stop (:func:`settle_times`)."""
     if clip.rot6d is None:
         raise UMFError(f"{clip.id}: no rotations; load clips through a prepared corpus")
     # one more joint frame gives the last velocity; frames past the clip's end are held or
     # repeat its last cycle (extended_frames)
     stop = start + length + 1
+    if period == SETTLE:
+        times = settle_times(clip.num_frames, start, stop)
+        out = []
+        for p in people:
+            joints = tf.apply(torch.from_numpy(interpolate_frames(clip.joints[p], times)))
+            rot = interpolate_frames(clip.rot6d[p], times)  # back to rotations: Gram-Schmidt
+            rot = matrix_to_6d(sixd_to_matrix(torch.from_numpy(rot)))
+            out.append(assemble_features(joints, rot))
+        return torch.stack(out)
     frames, _ = extended_frames(clip.num_frames, start, stop, period)
     out = []
     for p in people:
@@ -365,8 +411,10 @@ class SingleMotionDataset(_EpochDataset):
     ``labels``: only the people of clips with these content labels (all when empty).
     ``hold_rest`` / ``repeat_gait``: clips shorter than ``min_frames`` that end at rest / in
     a steady gait are served whole, then held / their last cycle repeated, up to a crop
-    length in [min_frames, max_frames] (module notes); ``extended`` maps (clip id, person) to
-    the period repeated (0: held).
+    length in [min_frames, max_frames] (module notes); ``settle``: those that end neither,
+    but slowly (:data:`SETTLE_SPEED`), are served whole with their end eased to a stop, then
+    held (:func:`settle_times`); ``extended`` maps (clip id, person) to the period repeated
+    (0: held, :data:`SETTLE`: eased to a stop).
     ``caption_mix``: the chance that an item's caption is drawn from a random clip of its
     group instead of its own, the group being the clips that share the metadata keys
     ``caption_mix_within`` (default content label and style) and, of those, only the clips
@@ -392,6 +440,7 @@ class SingleMotionDataset(_EpochDataset):
         respell: bool = False,
         hold_rest: bool = False,
         repeat_gait: bool = False,
+        settle: bool = False,
         labels: Sequence[str] = (),
         caption_mix: float = 0.0,
         caption_mix_within: Sequence[str] = ("content", "style"),
@@ -421,9 +470,11 @@ class SingleMotionDataset(_EpochDataset):
             self.items = _with_labels(self.items, labels, corpus, split)
         # items extended past their end: shorter than every crop, ending at rest or in a gait
         self.extended: dict[tuple[str, int], int] = {}
-        if hold_rest or repeat_gait:
+        if hold_rest or repeat_gait or settle:
             for clip, p, _ in self.items:
-                period = extension_period(clip.joints[p], min_frames, hold_rest, repeat_gait)
+                period = extension_period(
+                    clip.joints[p], min_frames, hold_rest, repeat_gait, settle
+                )
                 if period is not None:
                     self.extended[clip.id, p] = period
         if balance:

@@ -119,10 +119,11 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         common = dict(mirror=train, seed=t.seed, respell=train and t.respell_captions, **frames)
         if kind == "single":
             place = train and stage == "vae"
-            # hold_rest / repeat_gait define the target, so validation is extended too
+            # hold_rest / repeat_gait / settle define the target, so validation is extended too
             ds = SingleMotionDataset(corpus, split, normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
                                      hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
+                                     settle=t.settle,
                                      labels=t.labels,
                                      caption_mix=t.caption_mix if train else 0.0,
                                      caption_mix_within=t.caption_mix_within,
