@@ -2,6 +2,7 @@
 surviving mutant listed and either explained as equivalent or left to be killed.
 
     python scripts/mutation_report.py [--mutants mutants] [--out results/mutation]
+        [--previous results/mutation/mutation.json]   # a rerun of that report's survivors
 
 Reads the ``*.meta`` files mutmut 3 leaves under ``mutants/`` (one exit code per mutant:
 1 the tests failed, the mutant is killed; 0 they passed, it survived; 33 no test covers
@@ -9,6 +10,11 @@ it; 36, 24 or -24 it ran out of time, counted as killed as mutmut does; none, no
 each survivor's changed line, read off the mutated copies. The score is
 killed / (run - equivalent).
 Writes ``README.md`` and ``mutation.json`` under ``--out``.
+
+``--previous``: the mutants/ hold a rerun of only the survivors (and equivalents) of an
+earlier report of the same source (``make mutation-rerun``: a full run takes hours here,
+a rerun of the few hundred survivors minutes); every mutant that run killed keeps its
+outcome, every survivor takes the rerun's.
 """
 
 from __future__ import annotations
@@ -127,12 +133,48 @@ def read_results(mutants: Path) -> dict[str, int | None]:
     return codes
 
 
-def score(codes: dict[str, int | None], diffs: dict[str, str] | None = None,
-          equivalent: dict = EQUIVALENT, originals: dict[str, str] | None = None) -> dict:
+def rerun_names(previous: dict) -> list[str]:
+    """The mutants a rerun of ``previous`` (a mutation.json) checks again: every survivor,
+    every mutant no test covered and every equivalent (their reasons are judged again)."""
+    names = []
+    for m in previous["modules"].values():
+        names += m["survivors"] + list(m.get("equivalents", {}))
+    return sorted(names)
+
+
+def carry_over(codes: dict[str, int | None], previous: dict) -> tuple[dict, dict]:
+    """(codes, carried): the rerun's ``codes`` with every mutant of ``previous`` it left out
+    as a survivor (0), and per module the killed and timeout
+    counts of that run, which the rerun does not repeat. A rerun must not have run a mutant
+    that the previous run killed: it would count twice."""
+    rerun = {k: v for k, v in codes.items() if v is not None}
+    checked = set(rerun_names(previous))
+    if extra := sorted(set(rerun) - checked):
+        raise ValueError(f"{extra[0]} was rerun but is no survivor of the previous report")
+    merged, carried = dict(rerun), {}
+    for module, m in previous["modules"].items():
+        carried[module] = {"killed": m["killed"], "timeout": m["timeout"]}
+        for name in [*m["survivors"], *m.get("equivalents", {})]:
+            merged.setdefault(name, 0)
+    return merged, carried
+
+
+def score(
+    codes: dict[str, int | None],
+    diffs: dict[str, str] | None = None,
+    equivalent: dict = EQUIVALENT,
+    originals: dict[str, str] | None = None,
+    carried: dict | None = None,
+) -> dict:
     """Per module: counts by outcome, equivalents among the survivors (matched on their
-    function and changed line, ``diffs``), and the score."""
+    function and changed line, ``diffs``), and the score; ``carried`` adds per module the
+    killed and timeout counts of an earlier run (:func:`carry_over`)."""
     diffs = diffs or {}
     modules: dict[str, dict] = {}
+    for module, c in (carried or {}).items():
+        modules[module] = {"killed": c["killed"], "survived": 0, "timeout": c["timeout"],
+                           "no tests": 0, "not run": 0, "equivalent": 0,
+                           "survivors": []}  # fmt: skip
     for name, code in sorted(codes.items()):
         m = modules.setdefault(module_of(name), {"killed": 0, "survived": 0, "timeout": 0,
                                                  "no tests": 0, "not run": 0,
@@ -247,16 +289,41 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--mutants", type=Path, default=Path("mutants"))
     ap.add_argument("--out", type=Path, default=Path("results/mutation"))
+    ap.add_argument(
+        "--previous",
+        type=Path,
+        default=None,
+        help="the mutation.json whose survivors the mutants/ rerun",
+    )
+    ap.add_argument(
+        "--names",
+        action="store_true",
+        help="print the mutants a rerun of --previous checks, and exit",
+    )
     args = ap.parse_args()
+    previous = json.loads(args.previous.read_text()) if args.previous else None
+    if args.names:
+        if previous is None:
+            sys.exit("error: --names needs --previous")
+        print("\n".join(rerun_names(previous)))
+        return
     codes = read_results(args.mutants)
     if not codes:
         sys.exit(f"error: no mutmut results under {args.mutants} (run `make mutation`)")
+    carried = None
+    if previous is not None:
+        try:
+            codes, carried = carry_over(codes, previous)
+        except ValueError as e:
+            sys.exit(f"error: {e}")
     sources = mutant_sources(args.mutants)
     pairs = {name: changed_pair(name, sources) for name, code in codes.items()
              if classify(code) in ("survived", "no tests")}  # fmt: skip
     diffs = {name: new for name, (_, new) in pairs.items()}
+    if previous is not None:  # a survivor not rerun keeps the line the earlier run read
+        diffs = {name: new or previous["diffs"].get(name, "") for name, new in diffs.items()}
     originals = {name: old for name, (old, _) in pairs.items()}
-    modules = score(codes, diffs, originals=originals)
+    modules = score(codes, diffs, originals=originals, carried=carried)
     args.out.mkdir(parents=True, exist_ok=True)
     report = {"modules": modules, "diffs": diffs}
     (args.out / "mutation.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -5,6 +5,8 @@ from __future__ import annotations
 import json
 from pathlib import Path
 
+import pytest
+
 from conftest import load_script
 
 
@@ -111,3 +113,37 @@ def test_each_named_mutation_still_finds_its_line_once():
     for m in named.MUTATIONS:
         assert (named.REPO / m.path).read_text().count(m.before) == 1, m.name
         assert all((named.REPO / t).is_file() for t in m.tests), m.name
+
+
+def test_a_rerun_of_the_survivors_keeps_the_earlier_kills(tmp_path):
+    report = load_script("mutation_report")
+    name = "umf.flows.noise.x_randn__mutmut_"
+    previous = {"modules": {"umf.flows.noise": {
+        "killed": 18, "survived": 3, "timeout": 1, "no tests": 0, "not run": 0,
+        "equivalent": 1, "survivors": [f"{name}1", f"{name}2", f"{name}3"],
+        "equivalents": {f"{name}4": "device"}}},
+        "diffs": {f"{name}1": "a = 1", f"{name}2": "b = 2", f"{name}3": "c = 3",
+                  f"{name}4": "d = 4"}}  # fmt: skip
+    assert report.rerun_names(previous) == [f"{name}{i}" for i in (1, 2, 3, 4)]
+    # the rerun kills one survivor, another still survives, one was not run
+    codes = {f"{name}1": 1, f"{name}2": 0, f"{name}3": None, f"{name}4": 0}
+    merged, carried = report.carry_over(codes, previous)
+    assert merged == {f"{name}1": 1, f"{name}2": 0, f"{name}3": 0, f"{name}4": 0}
+    assert carried == {"umf.flows.noise": {"killed": 18, "timeout": 1}}
+    modules = report.score(
+        merged,
+        previous["diffs"],
+        carried=carried,
+        equivalent={("umf.flows.noise.x_randn", "d = 4"): "device"},
+    )
+    noise = modules["umf.flows.noise"]
+    assert (noise["killed"], noise["timeout"], noise["survived"], noise["equivalent"]) == (
+        19,
+        1,
+        2,
+        1,
+    )
+    assert noise["survivors"] == [f"{name}2", f"{name}3"]
+    assert noise["score"] == round(20 / 22, 4)
+    with pytest.raises(ValueError, match=f"{name}9 was rerun but is no survivor"):
+        report.carry_over({f"{name}9": 1}, previous)  # killed before: it would count twice
