@@ -98,6 +98,29 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         "at the pelvis (0) the walk up has met j or never will: stopping there answers alike",
     ("umf.kinematics.x__ancestry", "while a > 0 and a != j:"):
         "at the pelvis (0) the walk up has met j or never will: stopping there answers alike",
+    # representation and body frame (session 27)
+    ("umf.representation.x_assemble_features",
+     "return torch.cat([pos, vel, rot, foot_contacts(joints)], dim=+1)"):
+        "_check_joints forces (T, 22, 3): every piece is 2-D, so dim 1 is dim -1",
+    ("umf.representation.x_fuse_positions", "vel = features[..., VEL].to(None)"):
+        "only its last frame is used, cast back to the features' dtype: a float64 round trip "
+        "is exact and torch.cat promotes",
+    ("umf.representation.x_place_features",
+     "rot = yaw_matrix(torch.as_tensor(yaw, dtype=features.dtype)).to(None)"):
+        f"rot already has the features' dtype; .to(None) only drops the device move: {CPU}",
+    ("umf.representation.x_transform_features",
+     "rot = yaw_matrix(torch.tensor(tf.yaw, dtype=features.dtype)).to(None)"):
+        f"rot already has the features' dtype; .to(None) only drops the device move: {CPU}",
+    ("umf.representation.xǁRigidTransformǁapply",
+     "rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype)).to(None)"):
+        f"rot already has the joints' dtype; .to(None) only drops the device move: {CPU}",
+    ("umf.representation.xǁRigidTransformǁinvert",
+     "rot = yaw_matrix(torch.tensor(self.yaw, dtype=joints.dtype)).to(None)"):
+        f"rot already has the joints' dtype; .to(None) only drops the device move: {CPU}",
+    ("umf.body_frame.x_fit_body_normalizer", "spread = body[:, ROOT].pow(2).sum(+1).mean() / 2"):
+        "body[:, ROOT] is 2-D (N, 2): dim 1 is dim -1",
+    ("umf.body_frame.x_from_body_frame", "zero = torch.zeros_like(body[..., 1])"):
+        "body[..., 1] has the same shape, dtype and device as body[..., 0]",
 }  # fmt: skip
 
 

@@ -414,7 +414,8 @@ class SingleMotionDataset(_EpochDataset):
     length in [min_frames, max_frames] (module notes); ``settle``: those that end neither,
     but slowly (:data:`SETTLE_SPEED`), are served whole with their end eased to a stop, then
     held (:func:`settle_times`); ``extended`` maps (clip id, person) to the period repeated
-    (0: held, :data:`SETTLE`: eased to a stop).
+    (0: held, :data:`SETTLE`: eased to a stop; its crop length is drawn from the clip's own
+    length up, not from ``min_frames``).
     ``caption_mix``: the chance that an item's caption is drawn from a random clip of its
     group instead of its own, the group being the clips that share the metadata keys
     ``caption_mix_within`` (default content label and style) and, of those, only the clips
@@ -520,7 +521,10 @@ class SingleMotionDataset(_EpochDataset):
         rng = self._rng(index)
         period = self.extended.get((clip.id, person))
         if period is not None:  # the whole clip, then held or its last cycle repeated
-            start, length = 0, int(rng.integers(self.min_frames, self.max_frames + 1))
+            # an eased clip also at its own length: a flow asked for a getup as long as the
+            # real one must not have learnt it only at full-crop lengths
+            lo = min(clip.num_frames - 1, self.min_frames) if period == SETTLE else self.min_frames
+            start, length = 0, int(rng.integers(lo, self.max_frames + 1))
         else:
             start, length = crop_window(rng, clip.num_frames - 1, self.min_frames, self.max_frames)
         caption = clip.captions[int(rng.integers(len(clip.captions)))] if clip.captions else ""
