@@ -121,6 +121,40 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         "body[:, ROOT] is 2-D (N, 2): dim 1 is dim -1",
     ("umf.body_frame.x_from_body_frame", "zero = torch.zeros_like(body[..., 1])"):
         "body[..., 1] has the same shape, dtype and device as body[..., 0]",
+    # flows and validation (session 27)
+    ("umf.flows.pyramid.x_pyramid_training_sample",
+     "stages = _stage_tensor(stage, config, b, generator, None)"): f"device=None: {CPU}",
+    ("umf.flows.pyramid.x_pyramid_training_sample", "(removed: device=z1.device,)"):
+        f"sample_time's device argument: {CPU}",
+    ("umf.flows.pyramid.x_sample_pyramid",
+     "for i, (w, n_steps) in enumerate(zip(windows, steps, strict=None)):"):
+        "len(steps) == len(windows) is checked before the loop: strict never fires",
+    ("umf.flows.pyramid.x_sample_pyramid",
+     "for i, (w, n_steps) in enumerate(zip(windows, steps, )):"):
+        "len(steps) == len(windows) is checked before the loop: strict never fires",
+    ("umf.flows.pyramid.x_sample_pyramid",
+     "for i, (w, n_steps) in enumerate(zip(windows, steps, strict=False)):"):
+        "len(steps) == len(windows) is checked before the loop: strict never fires",
+    ("umf.flows.pyramid.x_sample_pyramid",
+     "stage = torch.full((x.shape[0],), w.stage, dtype=None, device=x.device)"):
+        "torch.full infers int64 (torch.long) from the Python int w.stage",
+    ("umf.flows.pyramid.x_sample_pyramid",
+     "stage = torch.full((x.shape[0],), w.stage, device=x.device)"):
+        "torch.full infers int64 (torch.long) from the Python int w.stage",
+    ("umf.flows.solvers.x__duplicate", "return torch.cat([value, value], )"):
+        "dim 0 is torch.cat's default",
+    ("umf.flows.solvers.x__stack_pair", "return torch.cat([a, b], )"):
+        "dim 0 is torch.cat's default",
+    ("umf.flows.solvers.x_classifier_free_guidance",
+     "out = velocity(torch.cat([x, x], ), torch.cat([t, t], 0), **dup, **both)"):
+        "dim 0 is torch.cat's default",
+    ("umf.flows.solvers.x_classifier_free_guidance",
+     "out = velocity(torch.cat([x, x], 0), torch.cat([t, t], ), **dup, **both)"):
+        "dim 0 is torch.cat's default",
+    ("umf.flows.semi_noise.x_semi_noise_training_sample", "(removed: device=context.device,)"):
+        f"sample_time's device argument: {CPU}",
+    ("umf.validation.x_check_prompts", 'p.encode("UTF-8")'):
+        "Python codec names are case-insensitive: 'UTF-8' is 'utf-8'",
 }  # fmt: skip
 
 
@@ -260,7 +294,7 @@ def device_only(original: str, mutated: str) -> bool:
 
 def changed_pair(mutant: str, sources: dict[str, str]) -> tuple[str, str]:
     """(original, mutated) first differing line of a mutant's function, stripped; '' for
-    what cannot be told (the mutated copies are gone), "(a line removed)" as the mutated
+    what cannot be told (the mutated copies are gone), "(removed: LINE)" as the mutated
     side of a deletion."""
     mine = sources.get(mutant, "").splitlines()[1:]
     orig = sources.get(function_of(mutant) + "__mutmut_orig", "").splitlines()[1:]
@@ -272,7 +306,7 @@ def changed_pair(mutant: str, sources: dict[str, str]) -> tuple[str, str]:
             old = line[2:].strip()
         elif line.startswith("+ "):
             return old, line[2:].strip()
-    return old, "(a line removed)" if len(mine) < len(orig) else ""
+    return old, f"(removed: {old})" if len(mine) < len(orig) else ""
 
 
 def changed_line(mutant: str, sources: dict[str, str]) -> str:

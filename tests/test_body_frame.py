@@ -77,3 +77,33 @@ def test_normalizer_covers_the_placement(walk):
     # contacts stay 0/1 labels
     assert torch.equal(placed.mean[-4:], torch.zeros(4))
     assert torch.equal(placed.std[-4:], torch.ones(4))
+
+
+def test_normalizer_defaults_are_the_plain_statistics(walk):
+    """No placement by default: the trajectory keeps the corpus's own mean and spread, and
+    std is floored at min_std = 1e-2 only (pose slots of a few centimetres stay as they are)."""
+    norm = fit_body_normalizer(walk)
+    body = to_body_frame(walk)
+    assert torch.allclose(norm.mean[:-4], body.mean(0)[:-4].float())
+    assert torch.allclose(norm.std[:-4], body.std(0).clamp_min(1e-2)[:-4].float())
+    assert norm.mean[HEADING][1] > 0.99  # the walk faces +Z throughout: cos(yaw) near 1
+    assert (norm.std[LOCAL_POS] < 0.5).any()  # small pose spreads are not floored up
+    assert (norm.std[:-4] == torch.tensor(1e-2)).any()  # e.g. the pelvis's local x and z
+
+
+def test_normalizer_accepts_any_leading_shape(walk):
+    scene = torch.stack([walk, place_features(walk, 1.0, 2.0, -0.5)])
+    a = fit_body_normalizer(scene, placement_radius=1.5)
+    b = fit_body_normalizer(scene.reshape(-1, scene.shape[-1]), placement_radius=1.5)
+    assert torch.equal(a.mean, b.mean) and torch.equal(a.std, b.std)
+
+
+@pytest.mark.parametrize("radius", [0.5, 3.0])
+def test_normalizer_root_spread_formula(walk, radius):
+    """Root x/z std = sqrt((mean canonical x^2 + z^2) / 2 + radius^2 / 3), any radius > 0."""
+    norm = fit_body_normalizer(walk, placement_radius=radius)
+    root = to_body_frame(walk)[:, ROOT]
+    spread = float((root[:, 0] ** 2 + root[:, 1] ** 2).mean()) / 2
+    want = math.sqrt(spread + radius**2 / 3)
+    assert torch.allclose(norm.std[ROOT].double(), torch.full((2,), want).double(), rtol=1e-6)
+    assert torch.equal(norm.mean[TRAJECTORY], torch.zeros(4))

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from typing import Any
 
 import pytest
@@ -31,7 +32,18 @@ from umf.flows import (
     stage_windows,
     up,
 )
-from umf.flows.pyramid import StageWindow
+from umf.flows import pyramid as pyr
+from umf.flows.pyramid import (
+    StageWindow,
+    block_noise,
+    block_size,
+    check_correlation,
+    down_1d,
+    down_2d,
+    max_correlation,
+    up_1d,
+    up_2d,
+)
 
 F64 = torch.float64
 P, R = 16, 64
@@ -398,3 +410,270 @@ def test_the_sampler_jumps_to_the_finer_stages_training_start(layout: Layout) ->
     cov_sd = (1 - s) ** 2 * torch.where(torch.eye(P, dtype=torch.bool), math.sqrt(2), 1.0)
     cov_z = ((cov - (1 - s) ** 2 * torch.eye(P)).abs() / (cov_sd / math.sqrt(samples))).max()
     assert mean_z < Z_OK and float(cov_z) < Z_OK, (mean_z, float(cov_z))
+
+
+# ------------------------------------------------- exact values, defaults, messages
+def _refused(message: str) -> Any:
+    """pytest.raises for a ValueError whose whole text is ``message``."""
+    return pytest.raises(ValueError, match="^" + re.escape(message) + "$")
+
+
+def test_resampling_functions_default_to_one_level() -> None:
+    y = torch.arange(16.0).reshape(1, 16, 1)
+    assert down_1d(y).flatten().tolist() == [0.5 + 2 * i for i in range(8)]
+    assert down_2d(y).flatten().tolist() == [2.5, 4.5, 10.5, 12.5]
+    c = torch.arange(4.0).reshape(1, 4, 1)
+    assert up_1d(c).flatten().tolist() == [0, 0, 1, 1, 2, 2, 3, 3]
+    assert up_2d(c).flatten().tolist() == [0, 0, 1, 1, 0, 0, 1, 1, 2, 2, 3, 3, 2, 2, 3, 3]
+
+
+@pytest.mark.parametrize("fn", [down_1d, up_1d, down_2d, up_2d])
+def test_zero_levels_return_the_input_itself(fn: Any) -> None:
+    x = torch.randn(2, 16, 3, generator=_gen(30))
+    assert fn(x, 0) is x
+
+
+def test_down_1d_pairs_the_token_axis_whatever_the_leading_dims() -> None:
+    y = torch.arange(8.0).reshape(4, 2)  # no batch axis: 4 tokens of 2 channels
+    assert down_1d(y).tolist() == [[1.0, 2.0], [5.0, 6.0]]
+    z = torch.arange(32.0).reshape(2, 2, 4, 2)  # two leading axes
+    torch.testing.assert_close(down_1d(z), (z[..., 0::2, :] + z[..., 1::2, :]) / 2)
+
+
+def test_up_repeats_2_to_the_levels_tokens() -> None:
+    c = torch.tensor([[[0.0], [1.0]]])
+    assert up_1d(c, 3).flatten().tolist() == [0.0] * 8 + [1.0] * 8  # 2^3, not 2 * 3
+    assert up(c, "1d", 3).shape == (1, 16, 1)
+    one = torch.tensor([[[5.0, -1.0]]])  # a 1x1 grid
+    assert up(one, "2d", 2).shape == (1, 16, 2)  # two 2x upsamplings: 1 -> 4 -> 16 tokens
+    x = torch.randn(2, 4, 3, generator=_gen(31))
+    torch.testing.assert_close(up(x, "2d", 2), up(up(x, "2d"), "2d"), atol=0, rtol=0)
+    assert torch.equal(down(up(x, "2d", 2), "2d", 2), x)
+
+
+def test_resampling_refuses_bad_token_counts_by_name() -> None:
+    with _refused("2-D layout needs an even square token count, got 8"):
+        down(torch.zeros(1, 8, 1), "2d")  # not a square
+    with _refused("2-D layout needs an even square token count, got 9"):
+        down(torch.zeros(1, 9, 1), "2d")  # an odd side cannot pool 2x2
+    with _refused("2-D layout needs a square token count, got 8"):
+        up(torch.zeros(1, 8, 1), "2d")
+    with _refused("cannot halve 5 tokens"):
+        down(torch.zeros(1, 5, 1), "1d")
+    with _refused("unknown layout '3d'"):
+        block_size("3d")  # type: ignore[arg-type]
+    with _refused("block size must be >= 2, got 1"):
+        max_correlation(1)
+
+
+def test_correlation_bounds_are_inclusive_with_a_rounding_tolerance() -> None:
+    check_correlation(0.0, 4)  # g = 0: Sigma' = I, independent noise is admissible
+    check_correlation(1 / 3, 4)
+    check_correlation(max_correlation(4) + pyr._G_TOL, 4)  # 1/3 rounded up is still 1/3
+    with _refused("g=0.3333333353 outside [0, 0.333333] for block size 4"):
+        check_correlation(round(1 / 3 + 2e-9, 10), 4)
+    with _refused("g=-0.1 outside [0, 1] for block size 2"):
+        check_correlation(-0.1, 2)
+    with _refused("g=0.5 outside [0, 0.333333] for block size 4"):
+        PyramidConfig(layout="2d", g=0.5)
+
+
+def test_jump_end_refuses_starts_outside_the_open_unit_interval() -> None:
+    for s in (0.0, 1.0, 1.5, -0.2):
+        with _refused(f"start of the finer stage must lie in (0, 1), got {s}"):
+            jump_end(s, 1 / 3)
+
+
+def test_stage_windows_messages_and_strictly_increasing_starts() -> None:
+    with _refused("num_stages must be >= 1, got 0"):
+        stage_windows(0, 1.0)
+    with _refused("starts must be 2 increasing values from 0, got [0.2, 0.5]"):
+        stage_windows(2, 0.5, starts=(0.2, 0.5))
+    with _refused("starts must be 3 increasing values from 0, got [0.0, 0.5, 0.5]"):
+        stage_windows(3, 1 / 3, starts=(0.0, 0.5, 0.5))  # two stages may not share a start
+    w = stage_windows(3, 1 / 3, starts=(0.0, 0.25, 0.5))
+    assert [x.start for x in w] == [0.0, 0.25, 0.5]
+    assert [x.end for x in w] == [jump_end(0.25, 1 / 3), jump_end(0.5, 1 / 3), 1.0]
+
+
+def test_config_validates_at_construction() -> None:
+    with _refused("num_stages must be >= 1, got 0"):
+        PyramidConfig(num_stages=0)
+    with _refused("16 tokens cannot form a 4-stage grid"):
+        PyramidConfig(layout="2d", num_stages=4)
+    with _refused("15 tokens cannot be halved 1 times"):
+        PyramidConfig(num_tokens=15)
+    with _refused("12 tokens cannot be halved 3 times"):
+        PyramidConfig(num_tokens=12, num_stages=4)  # 12 -> 6 -> 3 -> (1.5)
+    with _refused("starts must be 2 increasing values from 0, got [0.2, 0.5]"):
+        PyramidConfig(starts=(0.2, 0.5))  # bad starts are refused before .windows is read
+    flat = PyramidConfig(layout="2d", num_stages=1)  # no pyramid on a grid
+    assert flat.tokens(1) == 16 and flat.windows == (StageWindow(1, 0.0, 1.0),)
+    deep = PyramidConfig(layout="2d", num_stages=4, num_tokens=64)  # an 8x8 grid pools 3x
+    assert [deep.tokens(k) for k in (1, 2, 3, 4)] == [64, 16, 4, 1]
+    assert PyramidConfig(num_tokens=12, num_stages=3).tokens(3) == 3
+    white = PyramidConfig(g=0.0)  # independent noise: the coarse stage runs to the data
+    assert white.correlation == 0.0 and white.windows[0].end == 1.0
+
+
+def test_block_noise_from_white_hand_values() -> None:
+    z = torch.tensor([[[1.0], [3.0]]], dtype=F64)  # one pair: mean 2, detail -1, +1
+    n = block_noise_from_white(z, "1d", 0.5)
+    keep = math.sqrt(1 - 0.5)
+    assert n.flatten().tolist() == pytest.approx(
+        [-math.sqrt(1.5) + 2 * keep, math.sqrt(1.5) + 2 * keep], abs=1e-15
+    )
+    z = torch.tensor([[[1.0], [2.0], [3.0], [6.0]]], dtype=F64)  # one 2x2 cell, mean 3
+    n = block_noise_from_white(z, "2d", 0.2)
+    want = [math.sqrt(1.2) * d + math.sqrt(1 - 3 * 0.2) * 3 for d in (-2.0, -1.0, 0.0, 3.0)]
+    assert n.flatten().tolist() == pytest.approx(want, abs=1e-15)
+    white = torch.randn(2, P, 3, generator=_gen(32), dtype=F64)
+    torch.testing.assert_close(block_noise_from_white(white, "2d", 0.0), white)  # g = 0: I
+
+
+@pytest.mark.parametrize(("layout", "g"), [("1d", 1.0), ("2d", 0.2)])
+def test_block_noise_and_jump_replay_the_generator_in_the_states_dtype(
+    layout: Layout, g: float
+) -> None:
+    n = block_noise((2, P, 3), layout, g, generator=_gen(33), dtype=F64)
+    white = torch.randn(2, P, 3, generator=_gen(33), dtype=F64)
+    assert n.dtype == F64
+    torch.testing.assert_close(n, block_noise_from_white(white, layout, g), atol=0, rtol=0)
+
+    b = 2 if layout == "1d" else 4
+    z_end = torch.randn(3, P // b, 5, generator=_gen(34), dtype=F64)
+    s = 0.4
+    e, alpha = jump_end(s, g), jump_alpha(s, g)
+    out = jump(z_end, s=s, e=e, alpha=alpha, layout=layout, g=g, generator=_gen(35))
+    white = torch.randn(3, P, 5, generator=_gen(35), dtype=F64)
+    want = (s / e) * up(z_end, layout) + alpha * block_noise_from_white(white, layout, g)
+    assert out.dtype == F64
+    torch.testing.assert_close(out, want, atol=1e-14, rtol=0)
+
+
+def test_initial_noise_is_the_generators_first_draw_at_the_coarsest_resolution() -> None:
+    cfg = PyramidConfig(num_stages=3)
+    noise = initial_noise(cfg, 2, 5, generator=_gen(36), dtype=F64)
+    assert noise.dtype == F64 and noise.shape == (2, 4, 5)
+    want = torch.randn(2, 4, 5, generator=_gen(36), dtype=F64)
+    torch.testing.assert_close(noise, want, atol=0, rtol=0)
+    assert initial_noise(cfg, 1, 5).dtype == torch.float32
+
+
+@pytest.mark.parametrize(
+    ("kwargs", "loc", "scale"),
+    [
+        ({}, None, None),  # uniform
+        ({"time_distribution": "logit_normal"}, 0.0, 1.0),  # the distribution's defaults
+        ({"time_distribution": "logit_normal", "time_loc": 0.4, "time_scale": 2.0}, 0.4, 2.0),
+    ],
+)
+def test_training_sample_replays_stages_then_times_then_noise(
+    kwargs: dict[str, Any], loc: float | None, scale: float | None
+) -> None:
+    """One generator, drawn in the documented order: the stages, t', then one noise eps of
+    the full shape (its first tokens serve the coarser stages), all in z1's dtype."""
+    cfg = PyramidConfig(layout="1d", num_stages=3)
+    batch = 12
+    z1 = torch.randn(batch, P, 4, generator=_gen(40), dtype=F64)
+    smp = pyramid_training_sample(z1, cfg, generator=_gen(41), **kwargs)
+    twin = _gen(41)
+    stages = torch.randint(1, 4, (batch,), generator=twin)
+    if loc is None:
+        t_local = torch.rand(batch, generator=twin, dtype=F64)
+    else:
+        assert scale is not None
+        t_local = torch.sigmoid(loc + scale * torch.randn(batch, generator=twin, dtype=F64))
+    eps = torch.randn(z1.shape, generator=twin, dtype=F64)
+    assert smp.stage.dtype == torch.long and torch.equal(smp.stage, stages)
+    assert set(stages.tolist()) == {1, 2, 3}
+    assert smp.t_local.dtype == smp.t.dtype == smp.x.dtype == F64
+    torch.testing.assert_close(smp.t_local, t_local, atol=0, rtol=0)
+    for i in range(batch):
+        w = cfg.window(int(stages[i]))
+        n = cfg.tokens(w.stage)
+        x_level = down(z1[i : i + 1], "1d", w.level)
+        start, end = stage_endpoints(x_level, eps[i : i + 1, :n], w, "1d")
+        tl = float(t_local[i])
+        torch.testing.assert_close(smp.x[i, :n], (tl * end + (1 - tl) * start)[0])
+        torch.testing.assert_close(smp.target[i, :n], (end - start)[0])
+        assert float(smp.t[i]) == pytest.approx(w.start + tl * (w.end - w.start), abs=1e-15)
+
+
+def test_training_sample_forced_stages() -> None:
+    cfg = PyramidConfig(layout="1d")
+    z1 = torch.randn(3, P, 4, generator=_gen(42), dtype=F64)
+    fine = pyramid_training_sample(z1, cfg, stage=1, generator=_gen(43))  # the finest only
+    assert fine.stage.tolist() == [1, 1, 1] and bool(fine.mask.all())
+    assert bool((fine.target != 0).all())
+    t = fine.t_local[:, None, None]
+    torch.testing.assert_close(fine.x + (1 - t) * fine.target, z1)  # ends at the data
+    # a per-sample stage tensor (any integer dtype) with one sample alone in its stage
+    mixed = pyramid_training_sample(
+        z1, cfg, stage=torch.tensor([2, 1, 2], dtype=torch.int32), generator=_gen(44)
+    )
+    assert mixed.stage.dtype == torch.long and mixed.stage.tolist() == [2, 1, 2]
+    assert mixed.mask.sum(1).tolist() == [8, 16, 8]
+    assert bool((mixed.target[1] != 0).all())
+    for bad in (0, 3):
+        with _refused("stage must lie in [1, 2]"):
+            pyramid_training_sample(z1, cfg, stage=bad)
+    with _refused("expected 16 tokens, got 8"):
+        pyramid_training_sample(z1[:, :8], cfg)
+
+
+@pytest.mark.parametrize(("layout", "stages"), [("1d", 5), ("2d", 3)])
+def test_training_at_a_single_token_coarsest_stage(layout: Layout, stages: int) -> None:
+    """The coarsest stage starts at pure noise (s = 0), so it never pools its one token."""
+    cfg = PyramidConfig(layout=layout, num_stages=stages)
+    assert cfg.tokens(stages) == 1
+    z1 = torch.randn(4, P, 3, generator=_gen(45), dtype=F64)
+    smp = pyramid_training_sample(z1, cfg, stage=stages, generator=_gen(46))
+    assert smp.mask.sum(1).tolist() == [1] * 4
+    w = cfg.window(stages)
+    coarsest = down(z1, layout, stages - 1)
+    start, end = stage_endpoints(coarsest, torch.zeros(4, 1, 3, dtype=F64), w, layout)
+    assert torch.equal(start, torch.zeros(4, 1, 3, dtype=F64))
+    assert torch.equal(end, w.end * coarsest)
+
+
+def test_sampler_messages() -> None:
+    cfg = PyramidConfig(layout="1d")
+
+    def v(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor) -> torch.Tensor:
+        return x
+
+    with _refused("need 2 step counts (coarse -> fine), got (10,)"):
+        sample_pyramid(v, torch.zeros(1, 8, 2), cfg, steps=(10,))
+    with _refused("initial noise must have 8 tokens"):
+        sample_pyramid(v, torch.zeros(1, 16, 2), cfg)
+
+
+def test_three_stage_sampler_jumps_with_each_next_stages_start() -> None:
+    """With a zero velocity the sampler is its jumps alone: stage k's end state (the noise)
+    is scaled by s_{k-1}/e_k, upsampled and re-noised with alpha(s_{k-1}) block noise drawn
+    from the generator, every stage seeing its own index and global times."""
+    cfg = PyramidConfig(layout="1d", num_stages=3)  # g = 1, starts 0, 1/3, 2/3
+    noise = initial_noise(cfg, 2, 3, generator=_gen(50), dtype=F64)
+    seen: list[tuple[int, float]] = []
+
+    def still(x: torch.Tensor, t: torch.Tensor, *, stage: torch.Tensor) -> torch.Tensor:
+        assert stage.dtype == torch.long and stage.shape == (2,)
+        seen.append((int(stage[0]), float(t[0])))
+        return torch.zeros_like(x)
+
+    out = sample_pyramid(still, noise, cfg, steps=(2, 1, 2), generator=_gen(51))
+    twin = _gen(51)
+    x = noise
+    w3, w2, w1 = cfg.windows
+    assert (w2.start, w1.start) == (1 / 3, 2 / 3)
+    for w, s in ((w3, 1 / 3), (w2, 2 / 3)):
+        x_up = up(x, "1d")
+        white = torch.randn(x_up.shape, generator=twin, dtype=F64)
+        detail = white - up(down(white, "1d"), "1d")
+        x = (s / w.end) * x_up + (1 - s) / math.sqrt(2) * (math.sqrt(2) * detail)
+    assert out.nfe == 5 and out.x.dtype == F64
+    torch.testing.assert_close(out.x, x, atol=1e-12, rtol=0)
+    want = [(3, 0.0), (3, 0.5 * w3.end), (2, w2.start), (1, w1.start), (1, w1.start + 0.5 / 3)]
+    assert [k for k, _ in seen] == [k for k, _ in want]
+    assert [t for _, t in seen] == pytest.approx([t for _, t in want], abs=1e-7)

@@ -256,3 +256,26 @@ def test_loss_weighs_reconstruction_by_lambda_and_honours_the_mask():
     torch.testing.assert_close(half.total, plain.reaction + 0.5 * plain.recon)
     only = semi_noise_loss(wild[..., :3], target[..., :3], reaction_only=True, mask=mask)
     assert only.reaction == only.total < 1e3 and only.recon == 0
+
+
+def test_training_sample_passes_its_time_location_and_scale_on():
+    """logit-normal t = sigmoid(loc + scale * z) with the caller's loc and scale."""
+    context = torch.randn(5, 4, 3, dtype=F64)
+    reaction = torch.randn(5, 4, 3, dtype=F64)
+    mine, twin = _twin(13)
+    got = semi_noise_training_sample(context, reaction, generator=mine,
+                                     time_distribution="logit_normal", time_loc=0.7,
+                                     time_scale=2.5)  # fmt: skip
+    t = torch.sigmoid(0.7 + 2.5 * torch.randn(5, generator=twin, dtype=F64))
+    torch.testing.assert_close(got.t, t, atol=0, rtol=0)
+    eps = torch.randn(context.shape, generator=twin, dtype=F64)
+    want = semi_noise_state(context, reaction, eps, t)
+    torch.testing.assert_close(got.x, want.x, atol=0, rtol=0)
+
+
+def test_shape_messages():
+    c = torch.zeros(2, 4, 6)
+    with pytest.raises(ValueError, match=r"^context \(2, 4, 6\) vs reaction \(2, 4, 5\)$"):
+        semi_noise_training_sample(c, c[..., :5])
+    with pytest.raises(ValueError, match=r"^joint state needs an even channel count, got 5$"):
+        split_halves(c[..., :5])

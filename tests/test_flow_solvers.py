@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import itertools
 import math
+import re
 from typing import Any
 
 import pytest
@@ -153,3 +154,92 @@ def test_cfg_inside_solver_counts_guided_evaluations() -> None:
 def test_cfg_rejects_mismatched_keys() -> None:
     with pytest.raises(ValueError):
         classifier_free_guidance(_toy_model([]), 2.0, {"text": 1}, {})
+
+
+# ------------------------------------------------- defaults, messages, CFG batching
+def _refused(message: str) -> Any:
+    """pytest.raises for a ValueError whose whole text is ``message``."""
+    return pytest.raises(ValueError, match="^" + re.escape(message) + "$")
+
+
+def test_integrate_defaults_to_euler_from_0_to_1() -> None:
+    x0 = torch.ones(2, 3, dtype=F64)
+    seen: list[float] = []
+
+    def v(x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        seen.append(float(t[0]))
+        return -x
+
+    sol = integrate(v, x0, steps=4)  # Euler: x <- x + h * (-x) = 0.75 x, four times
+    assert sol.nfe == 4 and seen == [0.0, 0.25, 0.5, 0.75]
+    assert torch.equal(sol.x, x0 * 0.75**4)
+
+
+def test_solver_messages() -> None:
+    def v(x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+        return x
+
+    with _refused("give either steps or grid"):
+        integrate(v, torch.ones(1, 2))
+    with _refused("unknown method 'rk5'; choose from ['euler', 'heun', 'rk4']"):
+        integrate(v, torch.ones(1, 2), steps=2, method="rk5")  # type: ignore[arg-type]
+    with _refused("steps must be >= 1, got 0"):
+        time_grid(0)
+    with _refused("cond and uncond must have the same keys"):
+        classifier_free_guidance(v, 2.0, {"text": 1}, {"mask": 1})
+
+
+def _recording_model(seen: dict[str, Any]) -> Any:
+    def v(x: torch.Tensor, t: torch.Tensor, **kw: Any) -> torch.Tensor:
+        seen.update(kw)
+        seen["batch"] = x.shape[0]
+        level, gain, offset = kw["level"], kw["gain"], kw["offset"]
+        return x * kw["text"][:, None] * level + gain.sum() + offset + t[:, None]
+
+    return v
+
+
+def test_batched_cfg_doubles_only_per_sample_tensors() -> None:
+    """Shared call-time values: a (B, ...) tensor is repeated for [cond; uncond]; a 0-dim
+    tensor, a tensor of another length and a plain number go to the model unchanged."""
+    x, t = torch.randn(3, 2, dtype=F64), torch.rand(3, dtype=F64)
+    cond = {"text": torch.tensor([1.0, 2.0, 3.0], dtype=F64)}
+    uncond = {"text": torch.zeros(3, dtype=F64)}
+    shared = {"level": torch.tensor(2.0, dtype=F64), "gain": torch.ones(5, dtype=F64),
+              "offset": 0.5, "per_sample": torch.arange(3.0)}  # fmt: skip
+    seen: dict[str, Any] = {}
+    model = _recording_model(seen)
+    out = classifier_free_guidance(model, 2.5, cond, uncond)(x, t, **shared)
+    assert seen["batch"] == 6 and seen["offset"] == 0.5
+    assert seen["level"] is shared["level"] and seen["gain"] is shared["gain"]
+    assert seen["per_sample"].tolist() == [0.0, 1.0, 2.0, 0.0, 1.0, 2.0]
+    v_c, v_u = model(x, t, **shared, **cond), model(x, t, **shared, **uncond)
+    torch.testing.assert_close(out, v_u + 2.5 * (v_c - v_u))
+
+
+def test_batched_cfg_shares_equal_non_tensors_and_refuses_different_ones() -> None:
+    x, t = torch.randn(2, 2, dtype=F64), torch.rand(2, dtype=F64)
+    seen: dict[str, Any] = {}
+    base = {"level": 1.0, "gain": torch.ones(1, dtype=F64), "offset": 0.0}
+
+    def run(cond: dict[str, Any], uncond: dict[str, Any], batched: bool = True) -> Any:
+        guided = classifier_free_guidance(_recording_model(seen), 2.0, cond, uncond,
+                                          batched=batched)  # fmt: skip
+        return guided(x, t, **base)
+
+    cond = {"text": torch.ones(2, dtype=F64), "names": ["a", "b"]}
+    uncond = {"text": torch.zeros(2, dtype=F64), "names": ["a", "b"]}  # equal, not the same
+    run(cond, uncond)
+    assert seen["names"] == ["a", "b"] and seen["text"].tolist() == [1.0, 1.0, 0.0, 0.0]
+    same = ["a"]
+    run({**cond, "names": same}, {**uncond, "names": same})
+    assert seen["names"] is same
+    with _refused("cond/uncond entry 'names' differs but is not a tensor; cannot batch"):
+        run(cond, {**uncond, "names": ["a"]})
+    with _refused("cond/uncond entry 'text' differs but is not a tensor; cannot batch"):
+        run(cond, {**uncond, "text": None})
+    with _refused("cond/uncond entry 'text' differs but is not a tensor; cannot batch"):
+        run({**cond, "text": None}, uncond)
+    # unbatched, each call gets its own value: no need to agree
+    out = run(cond, {**uncond, "names": ["z"]}, batched=False)
+    assert out.shape == x.shape and seen["names"] == ["z"]

@@ -152,3 +152,243 @@ def test_transform_features_moves_positions_and_turns_velocities_both_ways(real_
     back = rep.joints_to_features(tf.invert(real_joints))
     torch.testing.assert_close(rep.transform_features(f, tf, inverse=True), back,
                                atol=1e-12, rtol=0)  # fmt: skip
+
+
+def test_check_joints_messages_and_two_frames_suffice():
+    with pytest.raises(ValueError, match=r"^expected joints \(T, 22, 3\), got \(10, 21, 3\)$"):
+        rep.joints_to_rot6d(torch.zeros(10, 21, 3))
+    with pytest.raises(ValueError, match=r"^need at least 2 frames to compute velocities$"):
+        rep.assemble_features(torch.zeros(1, 22, 3), torch.zeros(1, 21, 6))
+    # two frames are enough: one feature frame, its velocity the one difference
+    j = torch.zeros(2, 22, 3, dtype=torch.float64)
+    j[1, :, 2] = 0.25
+    f = rep.assemble_features(j, torch.zeros(2, 21, 6, dtype=torch.float64))
+    assert f.shape == (1, rep.FEATURE_DIM)
+    assert torch.equal(f[0, rep.VEL].reshape(22, 3)[:, 2], torch.full((22,), 0.25).double())
+
+
+def test_assemble_features_takes_the_joints_dtype(real_joints):
+    """Rotations of another precision are cast to the joints' dtype, not the other way."""
+    rot6d = rep.joints_to_rot6d(real_joints[:5])
+    f32 = rep.assemble_features(real_joints[:5].float(), rot6d)  # float64 rotations
+    assert f32.dtype == torch.float32
+    assert torch.equal(f32[:, rep.ROT], rot6d[:-1].reshape(4, 126).float())
+    f64 = rep.assemble_features(real_joints[:5], rot6d.float())
+    assert f64.dtype == torch.float64
+    assert torch.equal(f64[:, rep.ROT], rot6d[:-1].reshape(4, 126).float().double())
+
+
+def test_foot_contacts_thresholds_are_strict():
+    """A foot exactly at a height threshold, or moving exactly at the speed threshold, is
+    not in contact (``<``, compared in the joints' own precision); just below it is."""
+    j = torch.ones(3, 22, 3, dtype=torch.float64)
+    j[:, 7, 1] = 0.12  # l_ankle exactly at the ankle threshold
+    j[:, 10, 1] = 0.05  # l_foot exactly at the toe threshold
+    j[:, 8, 1] = 0.12 - 1e-9  # r_ankle just below
+    j[:, 11] = 0.0  # r_foot on the floor at the origin ...
+    j[1:, 11, 0] = 0.01  # ... moving (0.01, 0, 0.03) in frame 0: exactly the threshold
+    j[1:, 11, 2] = 0.03
+    disp2 = ((j[1:, 11] - j[:-1, 11]) ** 2).sum(-1)
+    assert disp2.tolist() == [rep.CONTACT_VELOCITY_THRESHOLD, 0.0]
+    c = rep.foot_contacts(j)
+    assert c.dtype == torch.float64
+    assert c.tolist() == [[0, 0, 1, 0], [0, 0, 1, 1]]
+
+
+def _stacked(walk):
+    return torch.stack([walk, rep.place_features(walk, 2.0, 3.0, -1.0)])
+
+
+@pytest.mark.parametrize(
+    "fn",
+    [
+        rep.features_to_joints_integrated,
+        rep.features_to_local_rotations,
+        rep.mirror_features,
+        lambda f: rep.place_features(f, 0.8, -0.5, 1.5),
+        lambda f: rep.transform_features(f, rep.RigidTransform(1.1, (0.7, 0.0, -1.3))),
+    ],
+    ids=["integrated", "local_rotations", "mirror", "place", "transform"],
+)
+def test_feature_functions_work_on_batches(real_joints, fn):
+    """(P, T, 262) gives what each (T, 262) gives on its own."""
+    walk = rep.joints_to_features(real_joints[:20])
+    scene = _stacked(walk)
+    out = fn(scene)
+    want = torch.stack([fn(scene[0]), fn(scene[1])])
+    assert out.shape == want.shape
+    assert torch.allclose(out, want, atol=1e-12)
+
+
+def test_foot_contacts_on_a_batch(real_joints):
+    j = real_joints[:20]
+    both = torch.stack([j, j.flip(-1)])  # the second person on a wall: no contacts
+    c = rep.foot_contacts(both)
+    assert c.shape == (2, 19, 4)
+    assert torch.equal(c[0], rep.foot_contacts(j))
+    assert torch.equal(c[1], rep.foot_contacts(j.flip(-1)))
+
+
+def test_facing_direction_per_pose_in_a_batch():
+    """Three poses (a batch of 3: a size the cross product must not take as the vector
+    axis) turned by three yaws face (sin, 0, cos) each, every one of unit length."""
+    from umf.skeleton import default_offsets
+
+    yaws = [0.3, 2.0, -1.2]
+    poses = []
+    for k, yaw in enumerate(yaws):
+        rot = torch.eye(3).repeat(22, 1, 1)
+        rot[0] = yaw_matrix(torch.tensor(yaw))
+        poses.append(forward_kinematics(rot, torch.tensor([k, 0.9, -k]), default_offsets()))
+    j = torch.stack(poses)  # (3, 22, 3)
+    fwd = rep.facing_direction(j)
+    want = torch.tensor([[math.sin(y), 0.0, math.cos(y)] for y in yaws])
+    assert fwd.shape == (3, 3)
+    assert torch.allclose(fwd, want, atol=1e-5)
+    assert torch.allclose(fwd.norm(dim=-1), torch.ones(3))
+
+
+def test_canonicalize_features_uses_person_one(real_joints):
+    """A scene (P, T, 262) moves with person 1's first frame, whatever person 2 does."""
+    walk = rep.joints_to_features(real_joints[:20])
+    one = rep.place_features(walk, 2.0, 3.0, -1.0)
+    two = rep.place_features(walk, -0.7, -2.0, 0.5)
+    canon = rep.canonicalize_features(torch.stack([one, two]))
+    assert canon.shape == (2, 19, rep.FEATURE_DIM)
+    assert torch.allclose(canon[0], rep.canonicalize_features(one), atol=1e-9)
+    tf = rep.leader_frame(one)
+    assert torch.allclose(canon[1], rep.transform_features(two, tf), atol=1e-9)
+    j0 = rep.features_to_joints(canon[0, 0])
+    assert abs(float(j0[0, 0])) < 1e-9 and abs(float(j0[0, 2])) < 1e-9
+
+
+# ------------------------------------------------------------------ fuse_positions
+def _least_squares(p, v, w):
+    """argmin_P w sum_t |P_t - p_t|^2 + sum_t<T-1 |P_{t+1} - P_t - v_t|^2, columnwise,
+    by a stacked least-squares problem (rows written out one by one)."""
+    t = p.shape[0]
+    rows, rhs = [], []
+    for i in range(t):
+        row = torch.zeros(t, dtype=torch.float64)
+        row[i] = math.sqrt(w)
+        rows.append(row)
+        rhs.append(math.sqrt(w) * p[i])
+    for i in range(t - 1):
+        row = torch.zeros(t, dtype=torch.float64)
+        row[i + 1], row[i] = 1.0, -1.0
+        rows.append(row)
+        rhs.append(v[i])
+    return torch.linalg.lstsq(torch.stack(rows), torch.stack(rhs), driver="gelsd").solution
+
+
+def _reference_fuse(f, w, root_w=None, height_w=None):
+    """The documented split: the pose relative to the pelvis at ``w``, the pelvis's floor
+    path (x, z) at ``root_w`` (default ``w``), its height at ``height_w`` (default
+    ``root_w``); velocity slots the fused differences, the last one kept."""
+    root_w = w if root_w is None else root_w
+    height_w = root_w if height_w is None else height_w
+    t = f.shape[0]
+    pos, vel = f[:, rep.POS].reshape(t, 22, 3), f[:, rep.VEL].reshape(t, 22, 3)
+    root, root_vel = pos[:, :1], vel[:, :1]
+    rel = _least_squares((pos - root).reshape(t, 66), (vel - root_vel).reshape(t, 66), w)
+    path = torch.stack(
+        [_least_squares(root[:, 0, c], root_vel[:, 0, c], height_w if c == 1 else root_w)
+         for c in range(3)], dim=-1)  # fmt: skip
+    fused = (rel.reshape(t, 22, 3) + path[:, None]).reshape(t, 66)
+    out = f.clone()
+    out[:, rep.POS] = fused
+    out[:-1, rep.VEL] = fused[1:] - fused[:-1]
+    return out
+
+
+def _noisy_features(t, seed=0):
+    gen = torch.Generator().manual_seed(seed)
+    return torch.randn(t, rep.FEATURE_DIM, generator=gen, dtype=torch.float64)
+
+
+@pytest.mark.parametrize(
+    "weights",
+    [(0.1,), (1.5,), (0.1, 2.5), (0.1, 2.5, 0.3), (0.7, None, 0.05)],
+    ids=["w", "w>1", "root", "root+height", "height"],
+)
+def test_fuse_positions_minimises_the_documented_objective(weights):
+    f = _noisy_features(7)
+    out = rep.fuse_positions(f, *weights)
+    want = _reference_fuse(f, *weights)
+    torch.testing.assert_close(out, want, atol=1e-12, rtol=0)
+    assert torch.equal(out[:, rep.ROT.start :], f[:, rep.ROT.start :])  # rotations, contacts
+    assert torch.equal(out[-1, rep.VEL], f[-1, rep.VEL])  # the last velocity is kept
+    assert not torch.allclose(out[:, rep.POS], f[:, rep.POS], atol=1e-3)
+
+
+def test_fuse_positions_two_frames_and_no_op_cases():
+    f = _noisy_features(2, seed=1)
+    torch.testing.assert_close(rep.fuse_positions(f, 0.4), _reference_fuse(f, 0.4),
+                               atol=1e-12, rtol=0)  # fmt: skip
+    # zero weight or one frame: nothing to fuse, the input comes back as it is
+    assert rep.fuse_positions(f, 0.0) is f
+    one = _noisy_features(1)
+    assert rep.fuse_positions(one, 0.4) is one
+
+
+def test_fuse_positions_batched_and_empty():
+    a, b = _noisy_features(6, seed=2), _noisy_features(6, seed=3)
+    both = rep.fuse_positions(torch.stack([a, b]), 0.2, 0.05, 1.0)
+    want = torch.stack([rep.fuse_positions(x, 0.2, 0.05, 1.0) for x in (a, b)])
+    torch.testing.assert_close(both, want, atol=1e-12, rtol=0)
+    empty = rep.fuse_positions(torch.zeros(0, 6, rep.FEATURE_DIM), 0.2)
+    assert empty.shape == (0, 6, rep.FEATURE_DIM)
+
+
+def test_fuse_positions_keeps_the_dtype_and_solves_in_float64():
+    """float32 features come back float32, solved in float64: the same numbers as fusing
+    their float64 copy and rounding once at the end."""
+    f32 = _noisy_features(9, seed=4).float()
+    out = rep.fuse_positions(f32, 0.1, 0.02, 0.5)
+    assert out.dtype == torch.float32
+    assert torch.equal(out, rep.fuse_positions(f32.double(), 0.1, 0.02, 0.5).float())
+
+
+# ------------------------------------------------------------------ normaliser
+def test_normalizer_defaults_and_any_leading_shape():
+    gen = torch.Generator().manual_seed(0)
+    f = torch.randn(3, 40, rep.FEATURE_DIM, generator=gen)
+    f[..., 5] = 2.5  # a constant dimension: std floored at min_std = 1e-2 by default
+    norm = rep.Normalizer.fit(f)
+    flat = rep.Normalizer.fit(f.reshape(-1, rep.FEATURE_DIM))
+    assert torch.equal(norm.mean, flat.mean) and torch.equal(norm.std, flat.std)
+    assert norm.mean.shape == norm.std.shape == (rep.FEATURE_DIM,)
+    assert norm.std[5] == torch.tensor(1e-2) and norm.mean[5] == 2.5
+    want = f.reshape(-1, rep.FEATURE_DIM).double().std(0).float()
+    assert torch.allclose(norm.std[:5], want[:5])  # unit-variance data: no floor
+    assert torch.equal(norm.mean[rep.CONTACT], torch.zeros(4))
+    assert torch.equal(norm.std[rep.CONTACT], torch.ones(4))
+
+
+@pytest.mark.parametrize("dtype", [torch.float16, torch.bfloat16, torch.float64])
+def test_normalizer_keeps_the_input_dtype(dtype):
+    norm = rep.Normalizer(torch.full((rep.FEATURE_DIM,), 0.5), torch.full((rep.FEATURE_DIM,), 2.0))
+    x = torch.linspace(-3, 3, rep.FEATURE_DIM, dtype=dtype)
+    z = norm.normalize(x)
+    assert z.dtype == dtype
+    assert torch.equal(z, (x - 0.5) / 2.0)
+    back = norm.denormalize(z)
+    assert back.dtype == dtype
+    assert torch.equal(back, z * 2.0 + 0.5)
+
+
+def test_normalizer_load_rejects_other_files(tmp_path):
+    from safetensors.torch import save_file
+
+    good = {"mean": torch.zeros(rep.FEATURE_DIM), "std": torch.ones(rep.FEATURE_DIM)}
+    bad = {
+        "extra": {**good, "other": torch.zeros(1)},
+        "short": {"mean": torch.zeros(10), "std": torch.ones(10)},
+    }
+    for name, tensors in bad.items():
+        path = tmp_path / f"{name}.safetensors"
+        save_file(tensors, str(path))
+        with pytest.raises(ValueError, match=r"^.*\.safetensors: not a umf normaliser file$"):
+            rep.Normalizer.load(path)
+    save_file(good, str(tmp_path / "good.safetensors"))
+    assert torch.equal(rep.Normalizer.load(tmp_path / "good.safetensors").std, good["std"])

@@ -291,3 +291,37 @@ def test_chunks_hold_at_most_the_budget():
     assert v.chunks(5, 2) == [range(0, 2), range(2, 4), range(4, 5)]
     assert v.chunks(4, 4) == [range(0, 4)]
     assert v.chunks(0, 3) == []
+
+
+def test_check_actor_accepts_the_edges_of_body_size(body):
+    """Exactly MIN_BODY_EXTENT is a body ("smaller than" is refused), and a body no known
+    unit makes adult-sized (a child, a giant) is taken as it is: the pipeline rescales it."""
+    edge = np.zeros((40, 22, 3))
+    edge[:, 1::2, 0] = v.MIN_BODY_EXTENT  # every frame spans exactly 0.2 m, along x only
+    assert float(np.ptp(edge, axis=1).max()) == v.MIN_BODY_EXTENT
+    assert v.check_actor(edge, 30.0, 300) is edge
+    from umf.units import choose_unit
+
+    for scale in (0.6, 3.0):
+        odd = body() * scale
+        assert choose_unit(odd)[1] == "stature"
+        assert v.check_actor(odd, 30.0, 300) is odd
+
+
+def test_check_finite_takes_tensors_numpy_cannot_read():
+    v.check_finite(torch.zeros(3, requires_grad=True), "the latents")  # a model's output
+    v.check_finite(torch.zeros(3, dtype=torch.bfloat16), "the latents")
+    with refused("non-finite values (NaN or inf) in the latents"):
+        v.check_finite(torch.tensor([0.0, float("nan")], dtype=torch.bfloat16), "the latents")
+    with refused("non-finite values (NaN or inf) in the latents"):
+        v.check_finite(torch.tensor([float("inf")], requires_grad=True), "the latents")
+
+
+def test_check_out_dir_still_checks_the_top_when_no_ancestor_exists(monkeypatch):
+    """The walk up stops at the top (here the relative "."), which is then checked like any
+    existing ancestor, not waved through."""
+    with monkeypatch.context() as m:
+        m.setattr(v.Path, "exists", lambda self: False)
+        m.setattr(v.Path, "is_dir", lambda self: False)
+        with refused("--out a/b: . is not a directory"):
+            v.check_out_dir(v.Path("a/b"))
