@@ -155,6 +155,37 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         f"sample_time's device argument: {CPU}",
     ("umf.validation.x_check_prompts", 'p.encode("UTF-8")'):
         "Python codec names are case-insensitive: 'UTF-8' is 'utf-8'",
+    # exports (session 27)
+    ("umf.exports.smpl.x_person_arrays",
+     "body = matrix_to_axis_angle(torch.from_numpy(rot)).numpy().reshape(len(rot), -2)"):
+        "numpy reads any negative size as 'the rest', like -1",
+    ("umf.exports.smpl.x_smpl_directions", "norm = np.linalg.norm(smpl, axis=+1, keepdims=True)"):
+        "smpl is (22, 3): axis 1 is axis -1",
+    ("umf.exports.smpl.x_smpl_directions",
+     "return unit * np.linalg.norm(offsets, axis=+1, keepdims=True)"):
+        "offsets is one person's (22, 3): axis 1 is axis -1",
+    ("umf.exports.smpl.x_smpl_directions",
+     "unit = np.divide(smpl, norm, out=None, where=norm > 0)"):
+        "only the pelvis row (norm 0) is left unwritten, and nothing reads row 0",
+    ("umf.exports.gltf.x__add_person",
+     "inverseBindMatrices=packer.add(ibm.reshape(-2, 16).astype(np.float32)),"):
+        "numpy reads any negative size as 'the rest', like -1",
+    ("umf.exports.gltf.x__as_bodies", "return fit_bodies(joints, )"):
+        "without contacts or a floor, clean changes nothing: clean_targets returns the joints",
+    ("umf.exports.gltf.x__as_bodies", "return fit_bodies(joints, clean=True)"):
+        "without contacts or a floor, clean changes nothing: clean_targets returns the joints",
+    ("umf.exports.gltf.x__body_boxes",
+     "direction = offsets[j] if length > 1e-6 else np.asarray(REST_DIRECTIONS[j], None)"):
+        "REST_DIRECTIONS are int tuples and _bone_axes divides by the norm: the same floats",
+    ("umf.exports.gltf.x__body_boxes",
+     "direction = offsets[j] if length > 1e-6 else np.asarray(REST_DIRECTIONS[j], )"):
+        "REST_DIRECTIONS are int tuples and _bone_axes divides by the norm: the same floats",
+    ("umf.exports.gltf.x__body_boxes", "axes = _bone_axes(np.asarray(REST_DIRECTIONS[w], None))"):
+        "REST_DIRECTIONS are int tuples and _bone_axes divides by the norm: the same floats",
+    ("umf.exports.gltf.x__body_boxes", "axes = _bone_axes(np.asarray(REST_DIRECTIONS[w], ))"):
+        "REST_DIRECTIONS are int tuples and _bone_axes divides by the norm: the same floats",
+    ("umf.exports.gltf.x_scene_to_gltf", '(removed: version="2.0",)'):
+        "pygltflib's Asset() defaults to version 2.0",
 }  # fmt: skip
 
 

@@ -258,6 +258,28 @@ def test_smpl22_round_trip(tmp_path: Path) -> None:
     assert np.abs(ref[:, idx] - expected).max() < 1e-5
 
 
+def test_scene_export_writes_each_person_at_the_scenes_fps(tmp_path: Path) -> None:
+    """umf.exports.bvh: one file per person (``{i}`` from 1), returned in order, each at the
+    scene's frame rate, its forward kinematics that person's joints."""
+    from umf.exports.bvh import write
+    from umf.scene import Scene
+
+    offsets = skeleton.default_offsets(torch.float64)
+    people = []
+    for seed in (3, 4):
+        local_rot, root_pos = random_motion(6, 22, seed=seed)
+        people.append(skeleton.forward_kinematics(local_rot, root_pos, offsets).numpy())
+    scene = Scene(np.stack(people), None, "two people", 24.0)
+    paths = write(scene, tmp_path / "pair-p{i}.bvh")
+    assert paths == [tmp_path / "pair-p1.bvh", tmp_path / "pair-p2.bvh"]
+    for i, path in enumerate(paths):
+        bvh = read_bvh(path)
+        assert bvh.fps == pytest.approx(24.0)
+        idx = [bvh.index(name) for name in skeleton.JOINT_NAMES]
+        positions, _ = forward_kinematics(bvh)
+        np.testing.assert_allclose(positions[:, idx], scene.joints[i], atol=1e-5)
+
+
 def test_write_generic_skeleton(tmp_path: Path) -> None:
     """Parents not in depth-first order, XYZ channels, numpy inputs, given End Sites."""
     names = ["hip", "tail", "spine", "tip", "head"]

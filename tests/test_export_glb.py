@@ -19,7 +19,7 @@ from conftest import MODULE
 from umf.errors import UMFError
 from umf.exports.gltf import write_glb
 from umf.pipeline import Scene
-from umf.skeleton import JOINT_NAMES
+from umf.skeleton import DEFAULT_OFFSETS, JOINT_NAMES
 
 REPO = Path(__file__).resolve().parents[1]
 VALIDATOR_ENV = "UMF_GLTF_VALIDATOR"
@@ -165,6 +165,7 @@ def test_structure(glb3, scene3):
     assert set(node_parents(gltf)).isdisjoint(roots)
     assert len(gltf.animations) == 1
     anim = gltf.animations[0]
+    assert anim.name == "umf"
     assert len(anim.channels) == n * 23  # pelvis translation + 22 rotations per person
     assert {s.interpolation for s in anim.samplers} == {"LINEAR"}
     time_acc = gltf.accessors[anim.samplers[0].input]
@@ -401,6 +402,117 @@ def test_body_is_a_box_per_bone_head_and_hand(glb3):
             assert 0.01 < np.delete(lengths, along).min() < 0.05  # flat: a palm, not a cube
 
 
+def _mesh_boxes(offsets: np.ndarray):
+    """The boxes (``_boxes``) of body_mesh for bone offsets (22, 3), pelvis at the origin,
+    and the rest positions of the joints."""
+    from umf.exports.gltf import body_mesh, rest_positions
+
+    rest = rest_positions(offsets, np.zeros(3))
+    mesh = body_mesh(offsets, rest)
+    for key in ("POSITION", "NORMAL"):
+        assert mesh[key].dtype == np.float32 and np.isfinite(mesh[key]).all()
+    boxes = _boxes(mesh["POSITION"].astype(np.float64), mesh["NORMAL"], mesh["JOINTS_0"][:, 0],
+                   mesh["indices"].reshape(-1, 3))  # fmt: skip
+    return boxes, rest
+
+
+def _bone_box(boxes, rest, offsets, j):
+    """(centre, axes, lengths) of bone j's box, found by where it is (the bone's middle)."""
+    parents = [-1, 0, 0, 0, 1, 2, 3, 4, 5, 6, 7, 8, 9, 9, 9, 12, 13, 14, 16, 17, 18, 19]
+    mid = rest[parents[j]] + offsets[j] / 2
+    found = [b for b in boxes if np.linalg.norm(b[1] - mid) < 1e-5]
+    assert len(found) == 1 and found[0][0] == parents[j], j
+    return found[0][1:]
+
+
+def _extent(axes: np.ndarray, lengths: np.ndarray, direction) -> float:
+    """The box's size along ``direction``, which must be one of its axes."""
+    k = np.argmax(np.abs(axes @ direction))
+    np.testing.assert_allclose(abs(axes[k] @ direction), np.linalg.norm(direction), atol=1e-6)
+    return float(lengths[k])
+
+
+def test_boxes_are_shaped_and_turned_like_a_body():
+    """Across a vertical bone the box is deep front to back and wide sideways (the chest
+    18 x 28 cm, the lower spine 16 x 24), limbs are 7 cm thick; a foot pointing forwards
+    and down is square to the body, 9 cm wide sideways."""
+    offsets = np.array(DEFAULT_OFFSETS, dtype=np.float64)
+    offsets[10] = [0.0, -0.04, 0.11]  # the left foot: forwards and down
+    boxes, rest = _mesh_boxes(offsets)
+    x, y, z = np.eye(3)
+    for j, deep, wide in ((9, 0.18, 0.28), (3, 0.16, 0.24), (20, 0.07, 0.07)):
+        _, axes, lengths = _bone_box(boxes, rest, offsets, j)
+        along = y if j != 20 else x  # the chest and spine stand up, the forearm points out
+        np.testing.assert_allclose(_extent(axes, lengths, along), np.linalg.norm(offsets[j]),
+                                   atol=1e-5)  # fmt: skip
+        np.testing.assert_allclose(_extent(axes, lengths, z), deep, atol=1e-5)
+        np.testing.assert_allclose(_extent(axes, lengths, np.cross(along, z)), wide, atol=1e-5)
+    _, axes, lengths = _bone_box(boxes, rest, offsets, 10)
+    foot = np.linalg.norm(offsets[10])
+    np.testing.assert_allclose(_extent(axes, lengths, offsets[10] / foot), foot, atol=1e-5)
+    np.testing.assert_allclose(_extent(axes, lengths, x), 0.09, atol=1e-5)
+
+
+@pytest.mark.parametrize("length", [0.0, 1e-6])
+def test_a_bone_without_length_gets_a_box_along_its_rest_direction(length):
+    """A bone of a micrometre or less has no direction of its own: its box lies along the
+    T-pose's (the thigh's: down), 1 cm long and as thick as a thigh."""
+    offsets = np.array(DEFAULT_OFFSETS, dtype=np.float64)
+    offsets[4] = [length, 0.0, 0.0]  # the left thigh (hip -> knee), squashed sideways
+    boxes, rest = _mesh_boxes(offsets)
+    _, axes, lengths = _bone_box(boxes, rest, offsets, 4)
+    np.testing.assert_allclose(_extent(axes, lengths, [0.0, -1.0, 0.0]), 0.01, atol=1e-6)
+    np.testing.assert_allclose(np.sort(lengths)[1:], [0.12, 0.12], atol=1e-6)
+
+
+def test_packer_aligns_every_view_whatever_the_array_size():
+    """The one buffer's views start 4-byte aligned, each right after the one before, the
+    gaps zero bytes; the buffer's length is the blob's; min/max only where asked for, and
+    integers for integer arrays."""
+    from umf.exports.gltf import _Packer
+
+    gltf = pygltflib.GLTF2()
+    packer = _Packer(gltf)
+    arrays = [np.array([[1], [7], [3]], np.uint8),  # 3 bytes: 1 of padding
+              np.array([[0.5, -2.0, 4.0]], np.float32),
+              np.arange(5, dtype=np.uint16)[:, None],  # 10 bytes: 2 of padding
+              np.array([[1.0, 2.0, 3.0, 4.0]], np.float32)]  # fmt: skip
+    bounds = [True, False, True, False]
+    index = [packer.add(a, bounds=b) for a, b in zip(arrays, bounds, strict=True)]
+    packer.finish()
+    blob = gltf.binary_blob()
+    views = [(v.byteOffset, v.byteLength) for v in gltf.bufferViews]
+    assert views == [(0, 3), (4, 12), (16, 10), (28, 16)]
+    assert gltf.buffers[0].byteLength == len(blob) == 44
+    assert blob[3:4] == b"\0" and blob[26:28] == b"\0\0"
+    for k, array, bounded in zip(index, arrays, bounds, strict=True):
+        np.testing.assert_array_equal(accessor(gltf, k), array)
+        acc = gltf.accessors[k]
+        if bounded:
+            assert acc.min == array.min(0).tolist() and acc.max == array.max(0).tolist()
+            assert all(isinstance(v, int) for v in acc.min + acc.max)
+        else:
+            assert not acc.min and not acc.max
+
+
+def test_rotation_keys_are_renormalised_in_float32():
+    from umf.exports.gltf import _float32_unit
+
+    out = _float32_unit(np.array([[0.0, 0.0, 0.6, 0.8], [1.0, 1.0, 1.0, 1.0]]) * 3.0)
+    assert out.dtype == np.float32
+    np.testing.assert_allclose(out, [[0.0, 0.0, 0.6, 0.8], [0.5, 0.5, 0.5, 0.5]], atol=1e-7)
+
+
+def test_joints_as_nested_lists_with_a_gap_are_the_nan_error(tmp_path):
+    """Joints may come as nested lists (as JSON gives them): a missing value (None, JSON's
+    null) is refused like NaN, in one line."""
+    joints = np.zeros((1, 3, 22, 3)).tolist()
+    joints[0][1][4][2] = None
+    with pytest.raises(UMFError, match="NaN or infinite values"):
+        write_glb(tmp_path / "gap.glb", joints, FPS)
+    assert not (tmp_path / "gap.glb").exists()
+
+
 def test_materials_are_matte_in_the_renders_colours(real_joints, tmp_path):
     """Person k's material is matte in the GIF's colour k; past the 12-colour palette the
     colours come round again, 30 % darker per round (never black)."""
@@ -424,6 +536,10 @@ def test_materials_are_matte_in_the_renders_colours(real_joints, tmp_path):
                         1.055 * linear ** (1 / 2.4) - 0.055)  # fmt: skip
         want = np.array(mcolors.to_rgb(PALETTE[k % 12])) * (0.7 if k >= 12 else 1.0)
         np.testing.assert_allclose(srgb, want, atol=2e-5)
+    # written to 6 decimals: the palette's first colour, #1f77b4, in linear RGB
+    first = next(nd for nd in gltf.nodes if nd.skin == 0)
+    material = gltf.materials[gltf.meshes[first.mesh].primitives[0].material]
+    assert material.pbrMetallicRoughness.baseColorFactor == [0.013702, 0.184475, 0.456411, 1.0]
 
 
 def test_document_names_links_views_and_defaults(real_joints, tmp_path):

@@ -95,3 +95,35 @@ def test_rest_corrections_turn_smpls_bones_onto_ours():
             np.testing.assert_array_equal(corr[j], corr[parents[j]])
     np.testing.assert_allclose(rest_corrections(template.copy()),
                                np.tile(np.eye(3), (22, 1, 1)), atol=1e-9)  # fmt: skip
+
+
+@pytest.mark.filterwarnings("error")  # and it warns of nothing on the way
+def test_smpl_file_holds_every_documented_array(tmp_path):
+    """The keys, dtypes, shapes and values smpl.py documents, one file per person (``{i}``
+    from 1): AMASS' split of ``poses``, flat hands, zero betas, the neutral SMPL-H body,
+    both spellings of the frame rate, the prompt; no pickled objects."""
+    poses, trans = _smpl_motion(frames=8, seed=2)
+    one = smpl_tree(poses, trans, SMPL_OFFSETS, SMPL_PELVIS)[:, :22]
+    scene = Scene(np.stack([one, one + np.array([1.5, 0.0, 0.0])]), None, "two SMPL bodies",
+                  24.0)  # fmt: skip
+    paths = scene.save_smpl(tmp_path / "body-p{i}.smpl.npz")
+    assert paths == [tmp_path / "body-p1.smpl.npz", tmp_path / "body-p2.smpl.npz"]
+    shapes = {"poses": (8, 156), "root_orient": (8, 3), "pose_body": (8, 63),
+              "pose_hand": (8, 90), "trans": (8, 3), "betas": (16,),
+              "joints": (8, 22, 3)}  # fmt: skip
+    for i, path in enumerate(paths):
+        with np.load(path, allow_pickle=False) as z:
+            assert set(z.files) == {*shapes, "gender", "surface_model_type", "mocap_framerate",
+                                    "mocap_frame_rate", "text"}  # fmt: skip
+            for key, shape in shapes.items():
+                assert (z[key].dtype, z[key].shape) == (np.float32, shape), key
+            body = z["poses"]
+            assert body[:, :66].any() and not body[:, 66:].any()
+            np.testing.assert_array_equal(z["root_orient"], body[:, :3])
+            np.testing.assert_array_equal(z["pose_body"], body[:, 3:66])
+            np.testing.assert_array_equal(z["pose_hand"], body[:, 66:])
+            assert not z["betas"].any()
+            np.testing.assert_allclose(z["joints"], scene.joints[i], atol=1e-6)
+            assert str(z["gender"]) == "neutral" and str(z["surface_model_type"]) == "smplh"
+            assert float(z["mocap_framerate"]) == float(z["mocap_frame_rate"]) == 24.0
+            assert str(z["text"]) == "two SMPL bodies"

@@ -350,3 +350,24 @@ def test_export_writes_each_person_at_20_fps_on_the_scenes_floor(real_joints, tm
     assert abs(own[..., 1].min()) < 2e-3  # no floor given: the person's lowest joint
     with pytest.raises(ValueError, match="at least 2 frames at 20 fps"):
         person_arrays(joints[0, :1], 30.0, floor=None)
+
+
+def test_export_arrays_are_float32_from_two_frames_on() -> None:
+    """The vectors, joints and fps are float32 whatever the input's dtype (float32 joints
+    are computed in float64, as float64 ones are); two frames at 20 fps, one vector, are
+    enough, one frame is refused."""
+    from umf.exports.humanml3d import person_arrays
+
+    walk = walking_motion(num_frames=40).numpy()
+    two = person_arrays(walk[:2], 20.0, floor=None)
+    assert two["new_joint_vecs"].shape == (1, 263) and two["new_joints"].shape == (2, 22, 3)
+    for key in ("new_joint_vecs", "new_joints", "fps"):
+        assert two[key].dtype == np.float32, key
+    assert two["fps"].shape == () and float(two["fps"]) == 20.0
+    single = walk[:32].astype(np.float32)
+    got = person_arrays(single, 20.0, floor=0.0)
+    want = person_arrays(single.astype(np.float64), 20.0, floor=0.0)
+    for key in want:
+        np.testing.assert_array_equal(got[key], want[key])
+    with pytest.raises(ValueError, match=r"^HumanML3D export needs at least 2 frames at 20 fps$"):
+        person_arrays(walk[:1], 20.0, floor=None)

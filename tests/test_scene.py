@@ -90,7 +90,7 @@ def test_npz_reads_back_as_the_same_scene(real_joints, tmp_path):
 @pytest.mark.parametrize("generated", [True, False])
 def test_npz_holds_every_documented_array(real_joints, tmp_path, generated):
     """The keys exports/npz.py documents, float32, with their values: a generated scene
-    (features, seed, coverage) and a motion file's (none of them; seed -1)."""
+    (features, seed, coverage) and a motion file's (none of them; seed -1; float64 joints)."""
     import json
 
     from umf.version import __version__
@@ -98,7 +98,8 @@ def test_npz_holds_every_documented_array(real_joints, tmp_path, generated):
     joints = np.stack([real_joints.numpy()[:20], real_joints.numpy()[:20] + 2.0])
     features = np.random.default_rng(0).normal(size=(2, 20, 262)) if generated else None
     meta = {"coverage": {"known": 0.75, "nearest": "a walk"}} if generated else {}
-    scene = Scene(joints.astype(np.float32), features, "two walks", 30.0,
+    dtype = np.float32 if generated else np.float64
+    scene = Scene(joints.astype(dtype), features, "two walks", 30.0,
                   seed=12 if generated else None, model="m-1" if generated else "",
                   meta=meta)  # fmt: skip
     data = np.load(scene.save_npz(tmp_path / "s.npz"))
