@@ -186,6 +186,87 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         "REST_DIRECTIONS are int tuples and _bone_axes divides by the norm: the same floats",
     ("umf.exports.gltf.x_scene_to_gltf", '(removed: version="2.0",)'):
         "pygltflib's Asset() defaults to version 2.0",
+    # kinematics (session 27)
+    ("umf.kinematics.x__lm_step",
+     "normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[+1])"):
+        "normal is (B, n, n): shape[1] is shape[-1]",
+    ("umf.kinematics.x__lm_step",
+     "normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[-2])"):
+        "normal is square: shape[-2] is shape[-1]",
+    ("umf.kinematics.x__lm_step",
+     "total = torch.einsum(\"AD,BAC->BDC\", torch.from_numpy(_UPTO).to(local), omega)"):
+        "torch.einsum accepts upper-case subscripts: the same contraction",
+    ("umf.kinematics.x__lm_step",
+     "for j in range(NUM_JOINTS):  # leaves keep their local rotation"):
+        "joint 0 is a driver, which the loop skips anyway",
+    ("umf.kinematics.x__lm_step",
+     "for j in range(2, NUM_JOINTS):  # leaves keep their local rotation"):
+        "joint 1 is a driver, which the loop skips anyway",
+    ("umf.kinematics.x__lm_step",
+     "new_local = parents.transpose(-1, +2) @ new_glob"):
+        "parents is 4-D (B, 22, 3, 3): dims (-1, +2) are (-1, -2)",
+    ("umf.kinematics.x_clean_targets",
+     "target = joints.astype(None).copy()"):
+        "numpy's astype(None) is float64 too",
+    ("umf.kinematics.x_fit_bodies",
+     "if joints.ndim != 4 or joints.shape[+2:] != (NUM_JOINTS, 3) or joints.shape[1] < 1:"):
+        "ndim is checked to be 4 first: shape[2:] is shape[-2:]",
+    ("umf.kinematics.x_fit_bodies",
+     "local = torch.stack([inverse_kinematics(p, None) for p, o in zip(data, offsets, strict=True)])"):  # noqa: E501
+        "IK uses only the offsets' directions, the same canonical ones for fitted and "
+        "default offsets (FK differs by 1e-18)",
+    ("umf.kinematics.x_fit_bodies",
+     "local = torch.stack([inverse_kinematics(p, ) for p, o in zip(data, offsets, strict=True)])"):
+        "IK uses only the offsets' directions, the same canonical ones for fitted and "
+        "default offsets (FK differs by 1e-18)",
+    ("umf.kinematics.x_fit_bodies",
+     "local = torch.stack([inverse_kinematics(p, o) for p, o in zip(data, offsets, strict=None)])"):
+        "offsets is built from data: the zipped lengths always match",
+    ("umf.kinematics.x_fit_bodies",
+     "local = torch.stack([inverse_kinematics(p, o) for p, o in zip(data, offsets, )])"):
+        "offsets is built from data: the zipped lengths always match",
+    ("umf.kinematics.x_fit_bodies",
+     "local = torch.stack([inverse_kinematics(p, o) for p, o in zip(data, offsets, strict=False)])"):  # noqa: E501
+        "offsets is built from data: the zipped lengths always match",
+    ("umf.kinematics.x_fit_bodies",
+     "c = None if contacts is None or not use else np.asarray(contacts[i], dtype=None)"):
+        "contacts are only compared with CONTACT_THRESHOLD: their dtype does not matter",
+    ("umf.kinematics.x_fit_bodies",
+     "c = None if contacts is None or not use else np.asarray(contacts[i], )"):
+        "contacts are only compared with CONTACT_THRESHOLD: their dtype does not matter",
+    ("umf.kinematics.x_fit_bodies",
+     "if iterations >= 0:"):
+        "refine with 0 iterations returns its input unchanged",
+    ("umf.kinematics.x_fit_bodies",
+     "lift = np.maximum(floor - lowest, 0.0) * np.array(flags, dtype=None)[:, None]"):
+        "a bool mask multiplies a float array alike",
+    ("umf.kinematics.x_fit_bodies",
+     "lift = np.maximum(floor - lowest, 0.0) * np.array(flags, )[:, None]"):
+        "a bool mask multiplies a float array alike",
+    ("umf.kinematics.x_normal_equations",
+     "below = torch.from_numpy(_BELOW).to(None)"):
+        "a 0/1 float64 mask times float32 levers, then .float(): the same values",
+    ("umf.kinematics.x_normal_equations",
+     "w = weight.float().repeat_interleave(3, dim=+1)[..., None]  # (B, 66, 1)"):
+        "weight is (B, 22): dim +1 is dim -1",
+    ("umf.kinematics.x_pin_targets",
+     "fade = 1.0 - np.arange(1, blend + 2) / (blend + 1)"):
+        "k <= blend, so fade[:k] never reaches the extra last entry",
+    ("umf.kinematics.x_pin_targets",
+     "k = min(blend, hi + lo)"):
+        "in the fade-in branch lo == 0 or hi - lo > 2 * blend, so min() is the same "
+        "(mutant 96 has the same text and is killed)",
+    ("umf.kinematics.x_refine",
+     "for s in range(0, flat[2].shape[0], BLOCK):"):
+        "flat[2] (offsets) has as many rows as flat[1] (roots)",
+    ("umf.kinematics.x_refine",
+     "lam = torch.full(rt.shape[:1], damping, dtype=None)"):
+        "not exact: a float32 damping schedule, cast to float32 for the solve anyway, "
+        "differs by float32 rounding only",
+    ("umf.kinematics.x_refine",
+     "lam = torch.full(rt.shape[:1], damping, )"):
+        "not exact: a float32 damping schedule, cast to float32 for the solve anyway, "
+        "differs by float32 rounding only",
 }  # fmt: skip
 
 
