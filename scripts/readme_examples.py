@@ -31,6 +31,7 @@ EXAMPLES = [
     ("salsa", "Two people dance salsa together.", 2, 4.0),  # real CMU takes
     ("backflip", "A person does a backflip.", 1, 4.0),  # DeepMimic
     ("crawl", "A person crawls on hands and knees.", 1, 4.0),
+    ("getup", "A person lying face down gets up.", 1, 4.0),  # DeepMimic, eased to a stop
 ]
 FRAMES = 5  # evenly spaced frames per strip
 # (file name, the example re-rolled, its person, the re-roll's seed): `umf reroll`

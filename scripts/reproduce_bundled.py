@@ -4,8 +4,8 @@ The bundled model was made in steps across several sessions (a VAE and both flow
 GPU, then fine-tunes on a CPU; each step has a results page). This runs the same steps
 in order, with the options those pages and the shipped ``config.json`` record, into
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
-(the last three stages, ``teach``, ``reteach`` and ``rebalance``, need the full corpus of ``make corpus``
-with ``../shared``: Bandai and the CMU and DeepMimic mocap):
+(the last four stages, ``teach``, ``reteach``, ``rebalance`` and ``settle``, need the full
+corpus of ``make corpus`` with ``../shared``: Bandai and the CMU and DeepMimic mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -15,8 +15,8 @@ Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again
 the finished stages and resumes the training it was in (``umf train --resume``). The
 first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice) wants a
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
-after it take about 2 h here (1.5 h of them the S-Flow). ``--dry-run`` prints the
-commands and runs nothing.
+after it take about 2 h here (1.5 h of them the S-Flow; the last, ``settle``, 20 min).
+``--dry-run`` prints the commands and runs nothing.
 
 Not bit-for-bit: the GPU stages ran with TF32 and the code changed between the steps, so
 expect the scores of ``results/umf-small-bandai-20261127c`` within their intervals, not the
@@ -39,7 +39,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261202c"
+NAME = "umf-small-bandai-20261203"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -108,6 +108,10 @@ RETEACH = [*sets("train_vae", max_steps=1000, balance_labels=1.0, lr=0.0002, rea
 # results/umf-small-bandai-20261202c: the P-Flow alone fine-tuned again with labels half
 # balanced (0.5), on the reteach VAE: the single-person FID back within its old interval
 REBALANCE = sets("train_pflow", max_steps=1600, real_repeats=60, balance_labels=0.5)
+
+# results/umf-small-bandai-20261203: the P-Flow once more, the same way, with slow clip ends
+# (the getups) eased to a stop and held (train_pflow.settle)
+SETTLE = sets("train_pflow", max_steps=1600, real_repeats=60, balance_labels=0.5, settle=True)
 
 
 class Stage(NamedTuple):
@@ -184,12 +188,18 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(Stage("reteach", [[*umf, "train", "finetune", "--from", str(teach / "model"), *c,
                                   "--out", str(reteach), *RETEACH, *cut("vae", "pflow", "sflow"),
                                   *(["--resume"] if reteach.exists() else [])]], {}))  # fmt: skip
+    def pflow_only(name: str, start: Path, options: list[str]) -> Stage:
+        run = work / "runs" / name
+        resume = ["--resume"] if run.exists() else []
+        return Stage(name, [[*umf, "train", "finetune", "--from", str(start), *c, "--out",
+                             str(run), "--stages", "pflow", *options, *cut("pflow"),
+                             *resume]], {})  # fmt: skip
+
     rebalance = work / "runs" / "rebalance"
-    out.append(Stage("rebalance", [[*umf, "train", "finetune", "--from", str(reteach / "model"),
-                                    *c, "--out", str(rebalance), "--stages", "pflow",
-                                    *REBALANCE, *cut("pflow"),
-                                    *(["--resume"] if rebalance.exists() else [])]], {}))  # fmt: skip
-    out.append(variant("name", rebalance / "model", work / "model", "--name", NAME))
+    out.append(pflow_only("rebalance", reteach / "model", REBALANCE))
+    settle = work / "runs" / "settle"
+    out.append(pflow_only("settle", rebalance / "model", SETTLE))
+    out.append(variant("name", settle / "model", work / "model", "--name", NAME))
     return out
 
 

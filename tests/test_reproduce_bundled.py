@@ -40,6 +40,7 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "teach",
         "reteach",
         "rebalance",
+        "settle",
     ]
     cfg = family_config("small")
     for name in chain:
@@ -89,8 +90,15 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     rebalance = stages["rebalance"][0]
     assert rebalance[rebalance.index("--from") + 1] == str(again / "model")
     assert rebalance[rebalance.index("--stages") + 1] == "pflow"
-    last = tmp_path / "runs" / "rebalance"
-    assert rebalance[rebalance.index("--out") + 1] == str(last)
+    balanced = tmp_path / "runs" / "rebalance"
+    assert rebalance[rebalance.index("--out") + 1] == str(balanced)
+    settle = stages["settle"][0]
+    assert settle[settle.index("--from") + 1] == str(balanced / "model")
+    assert settle[settle.index("--stages") + 1] == "pflow"
+    assert "train_pflow.settle=true" in _sets(settle)
+    assert "train_pflow.settle=true" not in _sets(rebalance)
+    last = tmp_path / "runs" / "settle"
+    assert settle[settle.index("--out") + 1] == str(last)
     assert stages["name"][0][2:4] == [str(last / "model"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
@@ -150,7 +158,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
-                     "mix", "teach", "reteach", "rebalance", "name"]  # fmt: skip
+                     "mix", "teach", "reteach", "rebalance", "settle", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
