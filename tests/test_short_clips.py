@@ -7,6 +7,7 @@ import sys
 from conftest import load_script, prepare_fixture_corpus
 from umf.data.corpus import Corpus
 from umf.train import datasets as D
+from umf.train import extension as E
 
 
 def test_short_clips_agrees_with_the_dataset(tmp_path, monkeypatch, capsys):
@@ -22,10 +23,10 @@ def test_short_clips_agrees_with_the_dataset(tmp_path, monkeypatch, capsys):
     repeated = sum(c["cycle repeated"] for c in kinds.values())
     assert repeated == sum(v > 0 for v in ds.extended.values()) == len(seams) > 0
     assert sum(c["as is"] for c in kinds.values()) == len(ds.items) - len(ds.extended)
-    assert all(seam <= D.GAIT_MATCH and turn < D.GAIT_TURN for seam, turn in seams)
+    assert all(seam <= E.GAIT_MATCH and turn < E.GAIT_TURN for seam, turn in seams)
     assert sum(map(len, lengths.values())) == len(ds.items)
     assert len(as_is) == len(ds.items) - len(ds.extended) > 0  # each refused by the rest test
-    assert all(v.max() >= D.REST_SPEED and how == "as is" for _, _, how, v in as_is)
+    assert all(v.max() >= E.REST_SPEED and how == "as is" for _, _, how, v in as_is)
     monkeypatch.setattr(sys, "argv", ["short_clips.py", "--corpus", str(tmp_path / "c"),
                                       "--min-frames", str(lo)])  # fmt: skip
     sc.main()
@@ -34,11 +35,11 @@ def test_short_clips_agrees_with_the_dataset(tmp_path, monkeypatch, capsys):
     assert "| label | short | held | cycle repeated | eased to a stop | as is |" in out
     assert ("not at rest" in out) == bool(as_is)
     # with --settle, the slow ends of those are eased to a stop, as the dataset's settle does
-    monkeypatch.setattr(D, "SETTLE_SPEED", 100.0)  # every clip not at rest and not a gait
+    monkeypatch.setattr(E, "SETTLE_SPEED", 100.0)  # every clip not at rest and not a gait
     settled = D.SingleMotionDataset(corpus, "train", None, lo, lo + 20, hold_rest=True,
                                     repeat_gait=True, settle=True)  # fmt: skip
     kinds, _, _, eased = sc.classify(clips, lo, settle=True)
     assert sum(c["eased to a stop"] for c in kinds.values()) == len(as_is) > 0
-    assert sum(v == D.SETTLE for v in settled.extended.values()) == len(eased) == len(as_is)
+    assert sum(v == E.SETTLE for v in settled.extended.values()) == len(eased) == len(as_is)
     assert all(how == "eased to a stop" for _, _, how, _ in eased)
     assert sum(c["as is"] for c in kinds.values()) == 0

@@ -23,6 +23,7 @@ from umf.representation import (
 )
 from umf.train import batching as B
 from umf.train import datasets as D
+from umf.train import extension as E
 
 
 @pytest.fixture(scope="module")
@@ -267,23 +268,23 @@ def _standing(frames: int = 40, seed: int = 0) -> np.ndarray:
 
 def test_ends_at_rest_needs_a_still_pelvis_and_still_feet():
     still = _standing()
-    assert D.ends_at_rest(still)
+    assert E.ends_at_rest(still)
     waving = still.copy()  # the arms may move: gestures are cut while the hands come down
     waving[:, [18, 19, 20, 21]] += np.linspace(0, 1.0, len(waving))[:, None, None]
-    assert D.ends_at_rest(waving)
+    assert E.ends_at_rest(waving)
     for joints in ([0], [7], [11]):  # pelvis, left ankle, right toe: 0.3 m/s over the end
         moving = still.copy()
         moving[-11:, joints, 2] += np.arange(11)[:, None] * 0.01
-        assert not D.ends_at_rest(moving), joints
-        speeds = D.end_speeds(moving)  # the one moving joint at 0.01 m x 30 fps, the rest ~0
-        k = D.REST_JOINTS.index(joints[0])
+        assert not E.ends_at_rest(moving), joints
+        speeds = E.end_speeds(moving)  # the one moving joint at 0.01 m x 30 fps, the rest ~0
+        k = E.REST_JOINTS.index(joints[0])
         assert speeds[k] == pytest.approx(0.3, abs=0.01)
         assert np.delete(speeds, k).max() < 0.01
     early = still.copy()  # moved before the last ten frames, still during them
     early[:-11, 0, 2] += np.arange(len(early) - 11) * 0.05
-    assert D.ends_at_rest(early)
-    assert not D.ends_at_rest(still[:1])
-    assert D.end_speeds(still[:1]).size == 0
+    assert E.ends_at_rest(early)
+    assert not E.ends_at_rest(still[:1])
+    assert E.end_speeds(still[:1]).size == 0
 
 
 def test_hold_rest_serves_short_clips_at_rest_whole_then_held(corpus):
@@ -294,7 +295,7 @@ def test_hold_rest_serves_short_clips_at_rest_whole_then_held(corpus):
     held = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False, hold_rest=True)
     assert not plain.extended
     expected = {(c.id, p) for c in clips.values() for p in range(c.num_people)
-                if D.ends_at_rest(c.joints[p])}  # fmt: skip
+                if E.ends_at_rest(c.joints[p])}  # fmt: skip
     assert held.extended == dict.fromkeys(expected, 0) and 0 < len(expected) < len(held.items)
     for i, (clip, person, _) in enumerate(held.items):
         a, b = plain[i], held[i]
@@ -321,7 +322,7 @@ def test_hold_rest_serves_short_clips_at_rest_whole_then_held(corpus):
 
 
 def test_settle_times_ease_the_last_frames_to_a_stop():
-    s = D.settle_times(20, 0, 40, frames=5)  # the last 5 frames (14..19) over 10, then held
+    s = E.settle_times(20, 0, 40, frames=5)  # the last 5 frames (14..19) over 10, then held
     np.testing.assert_array_equal(s[:15], np.arange(15))  # as it is up to the ease
     assert s[24] == 19 and (s[24:] == 19).all()  # reaches the last frame, then holds
     pace = np.diff(s)
@@ -329,16 +330,16 @@ def test_settle_times_ease_the_last_frames_to_a_stop():
     falling = pace[14:24]  # linear in time: each step 1/10 slower than the one before
     np.testing.assert_allclose(np.diff(falling), -0.1, atol=1e-12)
     assert falling[0] == pytest.approx(0.95) and falling[-1] == pytest.approx(0.05)
-    np.testing.assert_array_equal(D.settle_times(20, 5, 30, frames=5), s[5:30])  # a window
-    short = D.settle_times(4, 0, 12, frames=10)  # fewer frames than the ease: all of them
+    np.testing.assert_array_equal(E.settle_times(20, 5, 30, frames=5), s[5:30])  # a window
+    short = E.settle_times(4, 0, 12, frames=10)  # fewer frames than the ease: all of them
     assert short[0] == 0 and short[6] == 3 and (np.diff(short) >= 0).all()
-    assert D.settle_times(1, 0, 3).tolist() == [0, 0, 0]
+    assert E.settle_times(1, 0, 3).tolist() == [0, 0, 0]
 
 
 def test_interpolate_frames_is_exact_on_frames_and_linear_between():
     x = np.arange(5 * 2, dtype=np.float32).reshape(5, 2) ** 2
-    np.testing.assert_array_equal(D.interpolate_frames(x, np.array([0.0, 3.0, 4.0])), x[[0, 3, 4]])
-    mid = D.interpolate_frames(x, np.array([1.5, 3.25]))
+    np.testing.assert_array_equal(E.interpolate_frames(x, np.array([0.0, 3.0, 4.0])), x[[0, 3, 4]])
+    mid = E.interpolate_frames(x, np.array([1.5, 3.25]))
     np.testing.assert_allclose(mid, [(x[1] + x[2]) / 2, 0.75 * x[3] + 0.25 * x[4]])
     assert mid.dtype == x.dtype
 
@@ -349,23 +350,23 @@ def test_extension_period_settles_slow_ends_only():
     slow[-11:, 0, 1] += np.arange(11) * 0.01
     fast = still.copy()  # a foot still stepping at 1.5 m/s
     fast[-11:, 7, 2] += np.arange(11) * 0.05
-    assert D.extension_period(slow, 100, True, True) is None  # settle off: as it is
-    assert D.extension_period(slow, 100, True, True, settle=True) == D.SETTLE
-    assert D.extension_period(fast, 100, True, True, settle=True) is None
-    assert D.extension_period(still, 100, True, True, settle=True) == 0  # at rest: held
-    assert D.extension_period(slow, 59, True, True, settle=True) is None  # long enough
+    assert E.extension_period(slow, 100, True, True) is None  # settle off: as it is
+    assert E.extension_period(slow, 100, True, True, settle=True) == E.SETTLE
+    assert E.extension_period(fast, 100, True, True, settle=True) is None
+    assert E.extension_period(still, 100, True, True, settle=True) == 0  # at rest: held
+    assert E.extension_period(slow, 59, True, True, settle=True) is None  # long enough
 
 
 def test_settle_serves_slow_ending_clips_whole_then_eased_to_a_stop(corpus, monkeypatch):
-    monkeypatch.setattr(D, "SETTLE_SPEED", 100.0)  # every clip not at rest and not a gait
+    monkeypatch.setattr(E, "SETTLE_SPEED", 100.0)  # every clip not at rest and not a gait
     clips = {c.id: c for c in corpus.split_clips("train")}
     longest = max(c.num_frames for c in clips.values())
-    lo, hi = longest + 2 * D.SETTLE_FRAMES + 10, longest + 2 * D.SETTLE_FRAMES + 40
+    lo, hi = longest + 2 * E.SETTLE_FRAMES + 10, longest + 2 * E.SETTLE_FRAMES + 40
     plain = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False)
     eased = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False, hold_rest=True,
                                   settle=True)  # fmt: skip
-    settled = {k for k, v in eased.extended.items() if v == D.SETTLE}
-    assert settled and all(not D.ends_at_rest(clips[c].joints[p]) for c, p in settled)
+    settled = {k for k, v in eased.extended.items() if v == E.SETTLE}
+    assert settled and all(not E.ends_at_rest(clips[c].joints[p]) for c, p in settled)
     full = 0
     for i, (clip, person, _) in enumerate(eased.items):
         if (clip.id, person) not in settled:
@@ -376,14 +377,14 @@ def test_settle_serves_slow_ending_clips_whole_then_eased_to_a_stop(corpus, monk
             eased.set_epoch(epoch)
             lengths.append(eased[i]["length"])
         assert n <= min(lengths) and max(lengths) <= hi and min(lengths) < lo
-        epoch = next((e for e, length in enumerate(lengths) if length > n + 2 * D.SETTLE_FRAMES),
+        epoch = next((e for e, length in enumerate(lengths) if length > n + 2 * E.SETTLE_FRAMES),
                      None)  # fmt: skip
         if epoch is None:
             continue
         full += 1
         eased.set_epoch(epoch)
         a, b = plain[i], eased[i]
-        ease = n - D.SETTLE_FRAMES  # frames before it are the clip's own, untouched
+        ease = n - E.SETTLE_FRAMES  # frames before it are the clip's own, untouched
         assert b["start"] == 0
         f, g = b["features"].double(), a["features"].double()
         torch.testing.assert_close(f[:ease, POS], g[:ease, POS])
@@ -391,7 +392,7 @@ def test_settle_serves_slow_ending_clips_whole_then_eased_to_a_stop(corpus, monk
         torch.testing.assert_close(f[:ease, ROT], g[:ease, ROT], atol=1e-5, rtol=0)
         # the pace falls to zero over twice the eased frames, then the last pose is held
         speed = f[:, VEL].reshape(len(f), 22, 3).norm(dim=-1).max(dim=-1).values
-        end = ease + 2 * D.SETTLE_FRAMES
+        end = ease + 2 * E.SETTLE_FRAMES
         assert speed[end:].max() < 1e-6
         assert (speed[end - 3 : end] < speed[ease : ease + 3].max() + 1e-9).all()
         last = g[n - 1, POS] + g[n - 1, VEL]  # the clip's last pose: where the ease ends
@@ -406,12 +407,12 @@ def test_settle_serves_slow_ending_clips_whole_then_eased_to_a_stop(corpus, monk
 def test_repeat_gait_carries_short_walks_on(corpus):
     clips = {c.id: c for c in corpus.split_clips("train")}
     longest = max(c.num_frames for c in clips.values())
-    lo, hi = longest + D.GAIT_FRAMES[1] + 1, longest + D.GAIT_FRAMES[1] + 30  # room for a cycle
+    lo, hi = longest + E.GAIT_FRAMES[1] + 1, longest + E.GAIT_FRAMES[1] + 30  # room for a cycle
     ds = D.SingleMotionDataset(corpus, "train", None, lo, hi, mirror=False, hold_rest=True,
                                repeat_gait=True)  # fmt: skip
     gaits = {k: v for k, v in ds.extended.items() if v}
-    assert gaits and all(not D.ends_at_rest(clips[c].joints[p]) for c, p in gaits)
-    assert all(v == 0 for k, v in ds.extended.items() if D.ends_at_rest(clips[k[0]].joints[k[1]]))
+    assert gaits and all(not E.ends_at_rest(clips[c].joints[p]) for c, p in gaits)
+    assert all(v == 0 for k, v in ds.extended.items() if E.ends_at_rest(clips[k[0]].joints[k[1]]))
     for i, (clip, person, _) in enumerate(ds.items):
         period = gaits.get((clip.id, person))
         if not period:
@@ -443,13 +444,13 @@ def _tiled_walk(corpus, cycle: int = 24, frames: int = 200) -> np.ndarray:
 def test_extended_frames_hold_or_repeat_the_last_cycle():
     for bad in (-1, 10):
         with pytest.raises(ValueError, match="period"):
-            D.extended_frames(10, 0, 12, period=bad)
-    src, cycles = D.extended_frames(10, 7, 16)  # held
+            E.extended_frames(10, 0, 12, period=bad)
+    src, cycles = E.extended_frames(10, 7, 16)  # held
     assert src.tolist() == [7, 8, 9, 9, 9, 9, 9, 9, 9] and not cycles.any()
-    src, cycles = D.extended_frames(10, 7, 17, period=3)  # frames 7, 8, 9 then 7, 8, 9, ...
+    src, cycles = E.extended_frames(10, 7, 17, period=3)  # frames 7, 8, 9 then 7, 8, 9, ...
     assert src.tolist() == [7, 8, 9, 7, 8, 9, 7, 8, 9, 7]
     assert cycles.tolist() == [0, 0, 0, 1, 1, 1, 2, 2, 2, 3]
-    src, cycles = D.extended_frames(10, 2, 6, period=3)  # inside the clip: untouched
+    src, cycles = E.extended_frames(10, 2, 6, period=3)  # inside the clip: untouched
     assert src.tolist() == [2, 3, 4, 5] and not cycles.any()
 
 
@@ -457,26 +458,26 @@ def test_repeating_the_last_cycle_continues_a_periodic_walk_exactly(corpus):
     walk = _tiled_walk(corpus, cycle=24, frames=200)
     cut = walk[:70].astype(np.float32)
     walk = walk.astype(np.float32)
-    assert D.gait_period(cut) == 24
-    np.testing.assert_allclose(D.extend_joints(cut, 0, 200, 24), walk, atol=1e-4)
-    np.testing.assert_allclose(D.extend_joints(cut, 50, 120, 24), walk[50:120], atol=1e-4)
-    assert D.extend_joints(cut, 0, 200, 24).dtype == cut.dtype
-    held = D.extend_joints(cut, 0, 100)
+    assert E.gait_period(cut) == 24
+    np.testing.assert_allclose(E.extend_joints(cut, 0, 200, 24), walk, atol=1e-4)
+    np.testing.assert_allclose(E.extend_joints(cut, 50, 120, 24), walk[50:120], atol=1e-4)
+    assert E.extend_joints(cut, 0, 200, 24).dtype == cut.dtype
+    held = E.extend_joints(cut, 0, 100)
     np.testing.assert_array_equal(held[70:], np.repeat(cut[-1:], 30, axis=0))
 
 
 def test_gait_period_wants_a_steady_straight_travelling_cycle(corpus):
     walk = _tiled_walk(corpus, cycle=24, frames=70)
-    assert D.gait_period(walk) == 24
-    assert D.gait_period(walk, match=1.0) == 24
-    assert D.gait_period(_standing(70), match=1.0) == 0  # still: no travel
-    assert D.gait_period(walk[:15]) == 0  # no room for the shortest cycle (15 frames)
+    assert E.gait_period(walk) == 24
+    assert E.gait_period(walk, match=1.0) == 24
+    assert E.gait_period(_standing(70), match=1.0) == 0  # still: no travel
+    assert E.gait_period(walk[:15]) == 0  # no room for the shortest cycle (15 frames)
     jittered = walk + np.random.default_rng(0).normal(scale=0.1, size=walk.shape)
-    assert D.gait_period(jittered) == 0  # the last pose matches no earlier one
+    assert E.gait_period(jittered) == 0  # the last pose matches no earlier one
     # turning: each frame yawed a little further about the last pelvis position
     yaws = np.linspace(0, math.radians(120), len(walk))  # 26 degrees or more per cycle
     turned = np.stack([yaw_rotate(f, a) for f, a in zip(walk, yaws, strict=True)])
-    assert D.gait_period(turned, match=1.0) == 0
+    assert E.gait_period(turned, match=1.0) == 0
 
 
 # --------------------------------------------------------------------- scenes

@@ -255,15 +255,15 @@ class TrainConfig:
     # and only from clips whose metadata match these "key=value" pairs (e.g. style=normal)
     caption_mix_from: tuple[str, ...] = ()
     # single-person clips shorter than min_frames whose body ends at rest are held in their
-    # last pose up to a full crop (umf.train.datasets.ends_at_rest): the flow learns that a
+    # last pose up to a full crop (umf.train.extension.ends_at_rest): the flow learns that a
     # gesture ends standing, not what the latent of absent frames decodes to
     hold_rest: bool = False
     # and those that end in a steady, straight gait repeat their last cycle up to a full crop
-    # (umf.train.datasets.gait_period): a 4 s run keeps running instead of slowing to a glide
+    # (umf.train.extension.gait_period): a 4 s run keeps running instead of slowing to a glide
     repeat_gait: bool = False
     # and those that end neither, but slowly (every end speed under 1 m/s: a getup cut while
     # the pelvis still rises), are eased to a stop over their last frames, then held
-    # (umf.train.datasets.settle_times): a 4 s "get up" ends standing instead of bending again
+    # (umf.train.extension.settle_times): a 4 s "get up" ends standing instead of bending again
     settle: bool = False
     # VAE only: train the decoder and hold the encoder (and so every latent, and the flows
     # trained on them) fixed; needs a VAE to start from (`umf train vae --init MODEL`)

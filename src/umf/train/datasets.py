@@ -9,18 +9,9 @@ Frames of reference (decided here, used by every stage):
 * The VAE additionally sees ``random_placement``: a random yaw in [-pi, pi) and an XZ
   offset within ``placement_radius`` metres (:func:`place_features`), because it must
   encode person 2..N too, who start anywhere facing anywhere.
-* Short clips: a flow trained on the latents of clips shorter than its crops never sees
-  the latent tokens past a clip's end stand for anything, and what it makes past the
-  usual length of a label follows no data: a 4 s "raise both hands" (real clips: 2.4 s)
-  glides off after 2 s, a 4 s run (real clips: 3.2 s) slows to a glide. Two options extend a
-  single-person clip shorter than the shortest crop to a full crop where that can be done
-  truthfully, as the scene composer already holds people whose clips end early
-  (:func:`umf.data.scenes.time_layout`): ``hold_rest`` holds the last pose of a clip that
-  ends with the body at rest (:func:`ends_at_rest`); ``repeat_gait`` repeats the last
-  cycle of one that ends in a steady, straight gait (:func:`gait_period`), carried on along
-  the path it travelled; ``settle`` eases to a stop, then holds, one that ends slowly but
-  not yet at rest (a getup cut while the pelvis still rises: :func:`settle_times`). Other
-  clips are served as they are.
+* Short clips: a single-person clip shorter than the shortest crop is served whole and
+  then extended where that can be done truthfully (``hold_rest``, ``repeat_gait``,
+  ``settle``: :mod:`umf.train.extension`), else as it is.
 * Mirroring (p = 0.5) flips the motion left/right and swaps the side words of the caption
   (:func:`mirror_caption`); a canonical crop stays canonical when mirrored.
 
@@ -41,7 +32,7 @@ import torch
 from torch.utils.data import Dataset
 
 from umf.config import metadata_pairs
-from umf.data.clip import FPS, MotionClip
+from umf.data.clip import MotionClip
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.representation import (
@@ -50,14 +41,20 @@ from umf.representation import (
     assemble_features,
     canonical_transform,
     canonicalize_features,
-    heading_angle,
     mirror_features,
     place_features,
 )
 from umf.rotations import matrix_to_6d, sixd_to_matrix
-from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import swap_words, word_pattern
 from umf.train.batching import collate_scenes, collate_single
+from umf.train.extension import (
+    SETTLE,
+    extend_joints,
+    extended_frames,
+    extension_period,
+    interpolate_frames,
+    settle_times,
+)
 
 Tensor = torch.Tensor
 
@@ -118,153 +115,6 @@ def crop_window(
     lo = min(min_frames, hi)
     length = int(rng.integers(lo, hi + 1))
     return int(rng.integers(0, total - length + 1)), length
-
-
-REST_FRAMES = 10  # the last frames of a clip that decide whether it ends at rest
-REST_SPEED = 0.15  # m/s: pelvis and feet slower than this over them (a body not travelling)
-
-
-REST_JOINTS = (0, *FOOT_LEFT, *FOOT_RIGHT)  # pelvis, left ankle and toe, right ankle and toe
-
-
-def end_speeds(joints: np.ndarray, fps: float = FPS, frames: int = REST_FRAMES) -> np.ndarray:
-    """Mean speeds (m/s) of the :data:`REST_JOINTS` of one person's joints (T, 22, 3) over
-    its last ``frames`` frames; empty when the clip has fewer than two frames."""
-    j = np.asarray(joints, dtype=np.float64)[-(frames + 1) :, list(REST_JOINTS)]
-    if len(j) < 2:
-        return np.zeros(0)
-    return np.linalg.norm(np.diff(j, axis=0), axis=-1).mean(axis=0) * fps
-
-
-def ends_at_rest(
-    joints: np.ndarray, fps: float = FPS, frames: int = REST_FRAMES, speed: float = REST_SPEED
-) -> bool:
-    """Whether one person's joints (T, 22, 3) end standing: the pelvis and both feet (ankles,
-    toes) move slower than ``speed`` on average over the last ``frames`` frames
-    (:func:`end_speeds`). The arms may still move (the Bandai gestures are cut while the
-    hands come down)."""
-    v = end_speeds(joints, fps, frames)
-    return bool(v.size and v.max() < speed)
-
-
-GAIT_FRAMES = (15, 45)  # a gait cycle: 0.5 to 1.5 s at 30 fps
-GAIT_MATCH = 0.05  # m: mean joint distance of the last pose to the pose one cycle earlier
-GAIT_TURN = math.radians(15)  # most heading change over the cycle (turns are not repeated)
-GAIT_SPEED = 0.3  # m/s: least travel over the cycle (a gait goes somewhere; gestures do not)
-
-
-def last_cycle(
-    joints: np.ndarray, frames: tuple[int, int] = GAIT_FRAMES, fps: float = FPS
-) -> tuple[int, float, float, float]:
-    """The last cycle of one person's joints (T, 22, 3): (lag, seam m, turn rad, travel m/s).
-    The lag in ``frames`` is the one at which the pelvis-relative pose best matches the last
-    pose (a step to the other foot does not: left and right differ); the seam is that mean
-    joint distance, the turn the heading change and the travel the pelvis's floor speed over
-    the lag. Lag 0 (and the rest 0) when the clip is shorter than the shortest lag."""
-    j = np.asarray(joints, dtype=np.float64)
-    rel = j - j[:, :1]
-    lags = range(frames[0], min(frames[1], len(j) - 1) + 1)
-    if not lags:
-        return 0, 0.0, 0.0, 0.0
-    err = [float(np.linalg.norm(rel[-1] - rel[-1 - lag], axis=-1).mean()) for lag in lags]
-    lag = lags[int(np.argmin(err))]
-    yaw = heading_angle(torch.from_numpy(j[[-1 - lag, -1]])).numpy()
-    turned = abs((yaw[1] - yaw[0] + math.pi) % (2 * math.pi) - math.pi)
-    travel = float(np.linalg.norm(j[-1, 0, [0, 2]] - j[-1 - lag, 0, [0, 2]])) * fps / lag
-    return lag, min(err), float(turned), travel
-
-
-def gait_period(
-    joints: np.ndarray,
-    frames: tuple[int, int] = GAIT_FRAMES,
-    match: float = GAIT_MATCH,
-    turn: float = GAIT_TURN,
-    speed: float = GAIT_SPEED,
-    fps: float = FPS,
-) -> int:
-    """Frames in the last cycle of one person's joints (T, 22, 3); 0 where the clip does not
-    end in a steady, straight cycle: the :func:`last_cycle` counts when its seam is at most
-    ``match`` metres, its turn under ``turn`` radians and its travel ``speed`` m/s or more."""
-    lag, seam, turned, travel = last_cycle(joints, frames, fps)
-    return lag if lag and seam <= match and turned < turn and travel >= speed else 0
-
-
-SETTLE = -1  # extension "period" of a clip whose end is eased to a stop, then held
-SETTLE_FRAMES = 10  # the last frames replayed at a pace falling to zero, over twice as many
-SETTLE_SPEED = 1.0  # m/s: the most end speed (:func:`end_speeds`) of a clip eased to a stop
-
-
-def extension_period(
-    joints: np.ndarray, min_frames: int, hold_rest: bool, repeat_gait: bool, settle: bool = False
-) -> int | None:
-    """How one person's clip (T, 22, 3) is extended to a crop of ``min_frames`` feature
-    frames: None (long enough, or no option fits: served as it is), 0 (its last pose
-    held: ``hold_rest`` and :func:`ends_at_rest`), P (its last P frames repeated:
-    ``repeat_gait`` and :func:`gait_period`) or :data:`SETTLE` (its end eased to a stop,
-    then held: ``settle`` and every end speed under :data:`SETTLE_SPEED`; a clip cut while
-    the body still settles, e.g. DeepMimic's getups, which end with the pelvis rising)."""
-    if len(joints) - 1 >= min_frames:
-        return None
-    if hold_rest and ends_at_rest(joints):
-        return 0
-    if repeat_gait and (period := gait_period(joints)):
-        return period
-    if settle and (v := end_speeds(joints)).size and v.max() < SETTLE_SPEED:
-        return SETTLE
-    return None
-
-
-def settle_times(num_frames: int, start: int, stop: int, frames: int = SETTLE_FRAMES) -> np.ndarray:
-    """Source times (fractional frames) of frames ``start .. stop - 1`` of a clip of
-    ``num_frames`` frames eased to a stop: played as it is up to its last ``frames`` frames,
-    which then take twice as many frames at a pace falling linearly from 1 to 0 (the
-    velocity is continuous and ends at zero), then its last frame held. Only real poses and
-    poses between neighbouring real frames are served; nothing is extrapolated."""
-    t = np.arange(start, stop, dtype=np.float64)
-    k = min(frames, num_frames - 1)
-    if k <= 0:
-        return np.minimum(t, num_frames - 1)
-    ease = num_frames - 1 - k  # the frame where the pace starts to fall
-    u = np.clip(t - ease, 0.0, 2.0 * k)
-    return np.where(t <= ease, t, ease + u - u * u / (4.0 * k))
-
-
-def interpolate_frames(x: np.ndarray, times: np.ndarray) -> np.ndarray:
-    """``x`` (T, ...) at fractional frame ``times``: linear between the neighbouring frames."""
-    x = np.asarray(x)
-    lo = np.clip(np.floor(times).astype(np.int64), 0, len(x) - 1)
-    hi = np.minimum(lo + 1, len(x) - 1)
-    w = (np.asarray(times) - lo).reshape(-1, *([1] * (x.ndim - 1)))
-    return (x[lo] * (1.0 - w) + x[hi] * w).astype(x.dtype)
-
-
-def extended_frames(
-    num_frames: int, start: int, stop: int, period: int = 0
-) -> tuple[np.ndarray, np.ndarray]:
-    """Frames ``start .. stop - 1`` of a clip of ``num_frames`` frames, extended past its
-    end: (source frame, cycles added) per frame. ``period`` 0 holds the last frame (cycles
-    0); ``period`` P repeats the last P frames, the k-th repeat moved by k times the travel
-    of one cycle."""
-    if not 0 <= period < num_frames:
-        raise ValueError(f"period {period} must be in [0, {num_frames - 1}] ({num_frames} frames)")
-    t = np.arange(start, stop)
-    past = np.maximum(t - (num_frames - 1), 0)  # frames past the last one
-    if not period:
-        return np.minimum(t, num_frames - 1), np.zeros(len(t))
-    src = np.where(past > 0, num_frames - 1 - period + (past - 1) % period + 1, t)
-    return src, np.where(past > 0, (past - 1) // period + 1, 0).astype(np.float64)
-
-
-def extend_joints(joints: np.ndarray, start: int, stop: int, period: int = 0) -> np.ndarray:
-    """Joints (stop - start, 22, 3) of frames ``start .. stop - 1`` of one person's joints
-    (T, 22, 3) extended past the end (:func:`extended_frames`): held, or repeating the last
-    ``period`` frames, each repeat carried on by the pelvis's floor travel over the cycle."""
-    j = np.asarray(joints)
-    src, cycles = extended_frames(len(j), start, stop, period)
-    if not period:
-        return j[src]
-    travel = (j[-1, 0] - j[-1 - period, 0]) * np.array([1.0, 0.0, 1.0])
-    return (j[src] + cycles[:, None, None] * travel).astype(j.dtype)
 
 
 def item_rng(seed: int, epoch: int, index: int, stream: int = 0) -> np.random.Generator:
