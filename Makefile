@@ -51,11 +51,15 @@ bench: $(STAMP)
 # Mutation testing (mutmut) over the modules of [tool.mutmut] in pyproject.toml; the score
 # and every surviving mutant go to results/mutation/. PYTHONPATH puts the mutated copy
 # before the editable install.
+MUTMUT_RUN := PYTHONPATH=src OMP_NUM_THREADS=1 UMF_GLTF_VALIDATOR=$(abspath $(VENV))/node \
+	$(BIN)/mutmut run
+MUTATION_REPORT := PATH=$(abspath $(BIN)):$$PATH $(BIN)/python scripts/mutation_report.py \
+	--out results/mutation
 mutation: $(STAMP)
 	$(BIN)/pip install --quiet -c requirements.lock -e ".[mutation]"
 	rm -rf mutants
-	PYTHONPATH=src OMP_NUM_THREADS=1 UMF_GLTF_VALIDATOR=$(abspath $(VENV))/node $(BIN)/mutmut run
-	PATH=$(abspath $(BIN)):$$PATH $(BIN)/python scripts/mutation_report.py --out results/mutation
+	$(MUTMUT_RUN)
+	$(MUTATION_REPORT)
 
 # The survivors (and equivalents) of results/mutation alone, run again after tests were
 # written for them: minutes instead of the full run's hours. The mutants that run killed keep
@@ -64,10 +68,8 @@ MUTATION_PREVIOUS := results/mutation/mutation.json
 mutation-rerun: $(STAMP)
 	$(BIN)/pip install --quiet -c requirements.lock -e ".[mutation]"
 	rm -rf mutants
-	PYTHONPATH=src OMP_NUM_THREADS=1 UMF_GLTF_VALIDATOR=$(abspath $(VENV))/node $(BIN)/mutmut run \
-		$$($(BIN)/python scripts/mutation_report.py --previous $(MUTATION_PREVIOUS) --names)
-	PATH=$(abspath $(BIN)):$$PATH $(BIN)/python scripts/mutation_report.py --out results/mutation \
-		--previous $(MUTATION_PREVIOUS)
+	$(MUTMUT_RUN) $$($(BIN)/python scripts/mutation_report.py --previous $(MUTATION_PREVIOUS) --names)
+	$(MUTATION_REPORT) --previous $(MUTATION_PREVIOUS)
 
 # The full corpus: Bandai from ../shared/data/bandai (or BANDAI=...), and where ../shared is
 # present (or MOCAP_DATA=...) the real two-person takes (CMU salsa, CMU handshake) and the

@@ -44,17 +44,9 @@ from umf.representation import (
     mirror_features,
     place_features,
 )
-from umf.rotations import matrix_to_6d, sixd_to_matrix
 from umf.text import swap_words, word_pattern
 from umf.train.batching import collate_scenes, collate_single
-from umf.train.extension import (
-    SETTLE,
-    extend_joints,
-    extended_frames,
-    extension_period,
-    interpolate_frames,
-    settle_times,
-)
+from umf.train.extension import SETTLE, extend_person, extension_period
 
 Tensor = torch.Tensor
 
@@ -138,27 +130,15 @@ def _clip_crop(
 ):
     """Features (len(people), length, 262) of a crop, in the clip's floored frame; frames
     past the clip's end hold its last pose (``period`` 0), repeat its last ``period`` or,
-    for :data:`SETTLE`, follow its end eased to a stop (:func:`settle_times`)."""
+    for :data:`SETTLE`, follow its end eased to a stop (:func:`extend_person`)."""
     if clip.rot6d is None:
         raise UMFError(f"{clip.id}: no rotations; load clips through a prepared corpus")
-    # one more joint frame gives the last velocity; frames past the clip's end are held or
-    # repeat its last cycle (extended_frames)
-    stop = start + length + 1
-    if period == SETTLE:
-        times = settle_times(clip.num_frames, start, stop)
-        out = []
-        for p in people:
-            joints = tf.apply(torch.from_numpy(interpolate_frames(clip.joints[p], times)))
-            rot = interpolate_frames(clip.rot6d[p], times)  # back to rotations: Gram-Schmidt
-            rot = matrix_to_6d(sixd_to_matrix(torch.from_numpy(rot)))
-            out.append(assemble_features(joints, rot))
-        return torch.stack(out)
-    frames, _ = extended_frames(clip.num_frames, start, stop, period)
+    stop = start + length + 1  # one more joint frame gives the last velocity
     out = []
     for p in people:
-        joints = extend_joints(clip.joints[p], start, stop, period)
+        joints, rot = extend_person(clip.joints[p], clip.rot6d[p], start, stop, period)
         joints = tf.apply(torch.from_numpy(np.ascontiguousarray(joints)))
-        out.append(assemble_features(joints, torch.from_numpy(clip.rot6d[p, frames])))
+        out.append(assemble_features(joints, torch.from_numpy(np.ascontiguousarray(rot))))
     return torch.stack(out)
 
 

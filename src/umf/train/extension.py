@@ -27,6 +27,7 @@ import torch
 
 from umf.data.clip import FPS
 from umf.representation import heading_angle
+from umf.rotations import matrix_to_6d, sixd_to_matrix
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 
 REST_FRAMES = 10  # the last frames of a clip that decide whether it ends at rest
@@ -174,3 +175,19 @@ def extend_joints(joints: np.ndarray, start: int, stop: int, period: int = 0) ->
         return j[src]
     travel = (j[-1, 0] - j[-1 - period, 0]) * np.array([1.0, 0.0, 1.0])
     return (j[src] + cycles[:, None, None] * travel).astype(j.dtype)
+
+
+def extend_person(
+    joints: np.ndarray, rot6d: np.ndarray, start: int, stop: int, period: int = 0
+) -> tuple[np.ndarray, np.ndarray]:
+    """Joints (stop - start, 22, 3) and local 6-D rotations (stop - start, 21, 6) of frames
+    ``start .. stop - 1`` of one person, extended past the end as :func:`extension_period`
+    chose: held (0), repeating the last ``period`` frames (:func:`extend_joints`), or eased
+    to a stop (:data:`SETTLE`: :func:`settle_times`; rotations between two frames go back
+    to rotations through Gram-Schmidt)."""
+    if period == SETTLE:
+        times = settle_times(len(joints), start, stop)
+        rot = torch.from_numpy(interpolate_frames(rot6d, times))
+        return interpolate_frames(joints, times), matrix_to_6d(sixd_to_matrix(rot)).numpy()
+    frames, _ = extended_frames(len(joints), start, stop, period)
+    return extend_joints(joints, start, stop, period), rot6d[frames]
