@@ -4,8 +4,8 @@ The bundled model was made in steps across several sessions (a VAE and both flow
 GPU, then fine-tunes on a CPU; each step has a results page). This runs the same steps
 in order, with the options those pages and the shipped ``config.json`` record, into
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
-(the last four stages, ``teach``, ``reteach``, ``rebalance`` and ``settle``, need the full
-corpus of ``make corpus`` with ``../shared``: Bandai and the CMU and DeepMimic mocap):
+(the last five stages, ``teach``, ``reteach``, ``rebalance``, ``settle`` and ``pace``, need
+the full corpus of ``make corpus`` with ``../shared``: Bandai and the CMU and DeepMimic mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -15,7 +15,11 @@ Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again
 the finished stages and resumes the training it was in (``umf train --resume``). The
 first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice) wants a
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
-after it take about 2 h here (1.5 h of them the S-Flow; the last, ``settle``, 20 min).
+after it take about 2.5 h here (1.8 h of them the S-Flow; ``settle`` 20 min, the last,
+``pace``, 18 min). ``pace`` was trained on a corpus of the current composer (partners of
+side-by-side scenes at the leader's pace and in step); the stages before it on the composer
+of their day, whose side-by-side partners were paired at random: a corpus prepared now gives
+every stage the new scenes.
 ``--dry-run`` prints the commands and runs nothing.
 
 Not bit-for-bit: the GPU stages ran with TF32 and the code changed between the steps, so
@@ -39,7 +43,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261203"
+NAME = "umf-small-bandai-20261204"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -112,6 +116,10 @@ REBALANCE = sets("train_pflow", max_steps=1600, real_repeats=60, balance_labels=
 # results/umf-small-bandai-20261203: the P-Flow once more, the same way, with slow clip ends
 # (the getups) eased to a stop and held (train_pflow.settle)
 SETTLE = sets("train_pflow", max_steps=1600, real_repeats=60, balance_labels=0.5, settle=True)
+
+# results/umf-small-bandai-20261204: the S-Flow alone, on a corpus whose side-by-side
+# partners walk at the leader's pace and in step (the composer of that release)
+PACE = sets("train_sflow", max_steps=2000, real_repeats=60, val_every=400, ckpt_every=100)
 
 
 class Stage(NamedTuple):
@@ -188,18 +196,23 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(Stage("reteach", [[*umf, "train", "finetune", "--from", str(teach / "model"), *c,
                                   "--out", str(reteach), *RETEACH, *cut("vae", "pflow", "sflow"),
                                   *(["--resume"] if reteach.exists() else [])]], {}))  # fmt: skip
-    def pflow_only(name: str, start: Path, options: list[str]) -> Stage:
+
+    def one_flow(name: str, start: Path, flow: str, options: list[str]) -> Stage:
         run = work / "runs" / name
         resume = ["--resume"] if run.exists() else []
         return Stage(name, [[*umf, "train", "finetune", "--from", str(start), *c, "--out",
-                             str(run), "--stages", "pflow", *options, *cut("pflow"),
+                             str(run), "--stages", flow, *options, *cut(flow),
                              *resume]], {})  # fmt: skip
 
     rebalance = work / "runs" / "rebalance"
-    out.append(pflow_only("rebalance", reteach / "model", REBALANCE))
+    out.append(one_flow("rebalance", reteach / "model", "pflow", REBALANCE))
     settle = work / "runs" / "settle"
-    out.append(pflow_only("settle", rebalance / "model", SETTLE))
-    out.append(variant("name", settle / "model", work / "model", "--name", NAME))
+    out.append(one_flow("settle", rebalance / "model", "pflow", SETTLE))
+    pace = work / "runs" / "pace"
+    out.append(one_flow("pace", settle / "model", "sflow", PACE))
+    # results/step-budget-val-20261203: 5 + 5 P-Flow steps score like 45 + 5, 2.4x faster
+    out.append(variant("name", pace / "model", work / "model", "--set", "pflow.steps=[5,5]",
+                       "--name", NAME))  # fmt: skip
     return out
 
 

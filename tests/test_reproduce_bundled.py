@@ -41,6 +41,8 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "reteach",
         "rebalance",
         "settle",
+        "pace",
+        "name",
     ]
     cfg = family_config("small")
     for name in chain:
@@ -99,7 +101,12 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert "train_pflow.settle=true" not in _sets(rebalance)
     last = tmp_path / "runs" / "settle"
     assert settle[settle.index("--out") + 1] == str(last)
-    assert stages["name"][0][2:4] == [str(last / "model"), str(tmp_path / "model")]
+    pace = stages["pace"][0]
+    assert pace[pace.index("--from") + 1] == str(last / "model")
+    assert pace[pace.index("--stages") + 1] == "sflow"
+    paced = tmp_path / "runs" / "pace"
+    assert pace[pace.index("--out") + 1] == str(paced)
+    assert stages["name"][0][2:4] == [str(paced / "model"), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
 
@@ -158,7 +165,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
-                     "mix", "teach", "reteach", "rebalance", "settle", "name"]  # fmt: skip
+                     "mix", "teach", "reteach", "rebalance", "settle", "pace", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",

@@ -4,6 +4,7 @@ import pytest
 from umf.data import composer as C
 from umf.data import scenes as S
 from umf.data.relations import check, check_record, facing_angle, min_interperson_distance
+from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 
 
 @pytest.fixture(scope="module")
@@ -101,3 +102,59 @@ def test_time_layout():
     out = S.time_layout(j, delay=3, start=2, length=12)
     assert out.shape[0] == 12
     assert np.all(out[:4, 0, 0] == 2) and out[4, 0, 0] == 3 and out[-1, 0, 0] == 9
+
+
+def _walker(id: str, speed: float, frames: int = 90) -> S.Actor:
+    """A stick walker moving forward (+Z) at ``speed`` m per frame."""
+    j = np.zeros((frames, 22, 3), np.float32)
+    j[:, :, 1] = np.linspace(0.0, 1.6, 22)
+    j[:, :, 2] = speed * np.arange(frames)[:, None]
+    return S.Actor(id, j, "walk", "normal", 0)
+
+
+def test_paced_relations_pair_walkers_of_the_same_pace():
+    # two pace classes: a partner is always drawn from the leader's, never the leader itself
+    slow = [_walker("s1", 0.030), _walker("s2", 0.032)]
+    fast = [_walker("f1", 0.045), _walker("f2", 0.047)]
+    pools = {"walk": slow + fast}
+    rng = np.random.default_rng(0)
+    for name in ("walk_side_by_side", "group_line"):
+        rel = C.RELATIONS[name]
+        for _ in range(50):
+            n = 2 if name == "walk_side_by_side" else 4
+            people = C._pick_actors(rng, rel, n, pools)
+            assert people is not None and len(people) == n
+            group = slow if people[0] in slow else fast
+            assert all(p in group for p in people), [p.id for p in people]
+            assert all(p is not people[0] for p in people[1:])
+    # a leader with no partner at its pace walks beside its own clip, mirrored
+    a, b = _walker("a", 0.03), _walker("b", 0.05)
+    for _ in range(10):
+        lead, partner = C._pick_actors(rng, C.RELATIONS["walk_side_by_side"], 2, {"walk": [a, b]})
+        assert partner is lead
+        layout = C.RELATIONS["walk_side_by_side"].layout(rng, [lead, partner])
+        assert [p["mirrored"] for p in layout["people"]] == [False, True]
+    assert S.forward_travel(slow[0].joints)[-1] > 0
+
+
+def test_paced_scenes_keep_pace_to_the_end(actors):
+    by_id = {x.id: x for x in actors}
+    paced = ("walk_side_by_side", "run_side_by_side", "group_line")
+    recipes = C.compose_corpus(actors, 12, (2, 3, 4), seed=2, relations=paced)
+    assert recipes
+    for r in recipes:
+        j = S.build_scene(r, by_id)
+        # everybody moves until the last frame: no clip ends early and holds its last pose
+        assert all(
+            len(by_id[p["clip"]].joints) - p["start"] >= r["num_frames"] for p in r["people"]
+        )
+        travel = np.linalg.norm(j[:, -1, 0, [0, 2]] - j[:, 0, 0, [0, 2]], axis=-1)
+        assert np.all(np.abs(travel / travel[0] - 1.0) <= 0.2), (r["id"], travel)
+        # everybody starts on the line across the leader's heading (a clip cut at a stride
+        # is moved back by what it travelled before), and in step: the left foot ahead
+        assert np.all(np.abs(j[:, 0, 0, 2]) <= 0.2 + 1e-5), (r["id"], j[:, 0, 0, 2])
+        for k, p in enumerate(r["people"]):
+            if p["start"] > 0:
+                ahead = j[k, 0, FOOT_LEFT[1], 2] - j[k, 0, FOOT_RIGHT[1], 2]
+                assert ahead > 0.1, (r["id"], k, ahead)
+    assert any(p["start"] > 0 for r in recipes for p in r["people"])

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from umf.data.relations import check_record
-from umf.data.scene_relations import RELATIONS, Relation
+from umf.data.scene_relations import PACED, RELATIONS, Relation, same_pace
 from umf.data.scenes import MIN_FRAMES, Actor, build_scene
 
 
@@ -26,13 +26,18 @@ def _pick_actors(
             return None
         leader = lead[int(rng.integers(len(lead)))]
         roles = [(leader.content,)] + [(answers[leader.content],)] * (n - 1)
-    if relation.name in ("walk_side_by_side", "run_side_by_side", "group_line"):
-        # one speed class for everybody, so nobody overtakes
+    if relation.name in PACED:
+        # one speed class for everybody, and each partner within PACE_TOLERANCE of the
+        # leader's pace: partners of unequal pace drift apart, and a flow trained on them
+        # learns followers that fall behind (results/reaction-pace-20261202)
         first = [a for c in roles[0] for a in pools.get(c, [])]
         if not first:
             return None
-        kind = first[int(rng.integers(len(first)))].content
-        roles = [(kind,)] * n
+        leader = first[int(rng.integers(len(first)))]
+        # no other clip at its pace: the leader's own clip, mirrored by the layout
+        partners = [a for a in pools[leader.content] if a is not leader and same_pace(a, leader)]
+        partners = partners or [leader]
+        return [leader] + [partners[int(rng.integers(len(partners)))] for _ in range(n - 1)]
     for contents in roles:
         cands = [a for c in contents for a in pools.get(c, [])]
         if not cands:

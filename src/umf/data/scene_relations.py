@@ -11,8 +11,17 @@ from typing import Any
 
 import numpy as np
 
-from umf.data.relations import CONTACT_DISTANCE
-from umf.data.scenes import MAX_FRAMES, MIN_FRAMES, Actor, forward_travel, heading_to
+from umf.data.clip import FPS
+from umf.data.relations import CONTACT_DISTANCE, facing_dirs
+from umf.data.scenes import (
+    MAX_FRAMES,
+    MIN_FRAMES,
+    Actor,
+    forward_travel,
+    heading_to,
+    mirror_joints_np,
+)
+from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 
 NUMBER_WORDS = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven", 8: "eight"}
 
@@ -59,6 +68,73 @@ def _person(
         "yaw": float(yaw),
         "xz": [float(xz[0]), float(xz[1])],
     }
+
+
+# Relations whose people move together: their partners are drawn at the leader's pace
+# (the composer) and the scene ends with the shortest clip, so nobody stops while the
+# others go on.
+PACED = ("walk_side_by_side", "run_side_by_side", "group_line")
+PACE_TOLERANCE = 0.15  # m/s between mean forward speeds: under 0.6 m apart after 4 s
+
+
+def pace(actor: Actor) -> float:
+    """Mean forward speed (m/s) from the first left stride (where a paced scene cuts the
+    clip, :func:`_in_step`) over at most ``MAX_FRAMES`` frames."""
+    first = left_strides(actor.joints)[:1]
+    start = int(first[0]) if first.size and len(actor.joints) - first[0] >= MIN_FRAMES else 0
+    travel = forward_travel(actor.joints[start : start + MAX_FRAMES])
+    return float(travel[-1]) / max(len(travel) - 1, 1) * FPS
+
+
+def same_pace(a: Actor, b: Actor, tolerance: float = PACE_TOLERANCE) -> bool:
+    """Whether two clips move forward at mean speeds within ``tolerance`` m/s."""
+    return abs(pace(a) - pace(b)) <= tolerance
+
+
+def left_strides(joints: np.ndarray, reach: float = 0.1) -> np.ndarray:
+    """Frames where the left foot is furthest ahead of the right along the body's facing
+    (local maxima above ``reach`` metres): the phase of a walk or a run, (K,)."""
+    fwd = facing_dirs(joints)
+    sep = joints[:, FOOT_LEFT[1], :][:, [0, 2]] - joints[:, FOOT_RIGHT[1], :][:, [0, 2]]
+    s = np.sum(sep * fwd, axis=-1)
+    peak = (s[1:-1] >= s[:-2]) & (s[1:-1] > s[2:]) & (s[1:-1] > reach)
+    return np.flatnonzero(peak) + 1
+
+
+def _in_step(actors: Sequence[Actor], mirrored: Sequence[bool]) -> list[int]:
+    """Start frames that begin everybody at their first left stride: people in step, so
+    that a partner's legs follow from the leader's (two walkers at a random phase to each
+    other teach a flow the average of all phases: legs that barely move). Everybody is cut
+    alike, so a run's start from rest is skipped by all. A clip with no stride, or too few
+    frames after it, starts at its first frame."""
+    starts = []
+    for a, m in zip(actors, mirrored, strict=True):
+        j = mirror_joints_np(a.joints) if m else a.joints
+        first = left_strides(j)[:1]
+        starts.append(int(first[0]) if first.size and len(j) - first[0] >= MIN_FRAMES else 0)
+    return starts
+
+
+def _paced_people(
+    actors: Sequence[Actor], xz: Sequence[tuple[float, float]]
+) -> tuple[list[dict], int]:
+    """People of a paced relation at ``xz`` (each first pelvis position), in step with the
+    leader, a repeated clip mirrored; and the frames they all keep moving."""
+    mirrored = _mirrored_repeats(actors)
+    starts = _in_step(actors, mirrored)
+    people = []
+    for a, (x, z), m, s in zip(actors, xz, mirrored, starts, strict=True):
+        j = mirror_joints_np(a.joints) if m else a.joints
+        at = j[s, 0]  # a clip cut at frame s starts there: move it back to xz
+        people.append(_person(a, 0.0, (x - float(at[0]), z - float(at[2])), start=s, mirrored=m))
+    n = min(len(a.joints) - s for a, s in zip(actors, starts, strict=True))
+    return people, int(min(n, MAX_FRAMES))
+
+
+def _mirrored_repeats(actors: Sequence[Actor]) -> list[bool]:
+    """Mirror every second appearance of a clip, so that a partner drawn from the leader's
+    own clip (no other at its pace) does not step in lockstep with it."""
+    return [sum(b is a for b in actors[:i]) % 2 == 1 for i, a in enumerate(actors)]
 
 
 def _length(
@@ -138,12 +214,10 @@ def _bow_back_captions(rng, actors, n):
 
 
 def _side_by_side(rng, actors, spacing=(0.7, 1.1)):
-    a, b = actors
     lat = float(rng.uniform(*spacing))
     side = "left" if rng.random() < 0.5 else "right"
     x = lat if side == "left" else -lat
-    n = _length(actors, [0, 0])
-    people = [_person(a, 0.0, (0.0, 0.0)), _person(b, 0.0, (x, float(rng.uniform(-0.2, 0.2))))]
+    people, n = _paced_people(actors, [(0.0, 0.0), (x, float(rng.uniform(-0.2, 0.2)))])
     cons = [
         {"type": "same_heading", "a": 0, "b": 1},
         {"type": "side", "a": 0, "b": 1, "side": side},
@@ -341,11 +415,7 @@ def _line(rng, actors, spacing=(0.8, 1.1)):
     n_people = len(actors)
     gap = float(rng.uniform(*spacing))
     xs = (np.arange(n_people) - (n_people - 1) / 2) * gap
-    n = _length(actors, [0] * n_people)
-    people = [
-        _person(a, 0.0, (float(x), float(rng.uniform(-0.15, 0.15))))
-        for a, x in zip(actors, xs, strict=True)
-    ]
+    people, n = _paced_people(actors, [(float(x), float(rng.uniform(-0.15, 0.15))) for x in xs])
     cons = [{"type": "same_heading", "a": 0, "b": i} for i in range(1, n_people)]
     # x grows to the left of people facing +Z: each next person is on the previous one's left
     cons += [{"type": "side", "a": i, "b": i + 1, "side": "left"} for i in range(n_people - 1)]
