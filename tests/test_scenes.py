@@ -158,3 +158,26 @@ def test_paced_scenes_keep_pace_to_the_end(actors):
                 ahead = j[k, 0, FOOT_LEFT[1], 2] - j[k, 0, FOOT_RIGHT[1], 2]
                 assert ahead > 0.1, (r["id"], k, ahead)
     assert any(p["start"] > 0 for r in recipes for p in r["people"])
+
+
+def test_left_strides_find_the_left_foot_forward():
+    """A synthetic gait whose left foot leads the right by 0.3 sin(2 pi f / 30) m: the
+    strides are the sine's crests, one per 30 frames, and a still body has none."""
+    from umf.data.pace import left_strides, stride_start
+    from umf.skeleton import FACE_JOINTS
+
+    frames = 100
+    j = np.zeros((frames, 22, 3), np.float32)
+    r_hip, l_hip, r_sh, l_sh = FACE_JOINTS  # facing +Z: left is +X
+    for k, x in ((l_hip, 0.1), (r_hip, -0.1), (l_sh, 0.2), (r_sh, -0.2)):
+        j[:, k, 0] = x
+    lead = 0.3 * np.sin(2 * np.pi * np.arange(frames) / 30)
+    j[:, FOOT_LEFT[1], 2], j[:, FOOT_RIGHT[1], 2] = lead / 2, -lead / 2
+    # crests at 7.5, 37.5 ...: frames 7 and 8 tie, and the later one is the local maximum
+    assert left_strides(j).tolist() == [8, 38, 68, 98]
+    assert stride_start(j) == left_strides(j)[0]
+    assert left_strides(np.zeros_like(j)).size == 0 and stride_start(np.zeros_like(j)) == 0
+    # mirrored (left and right swapped), the crests move half a cycle
+    swapped = j.copy()
+    swapped[:, [FOOT_LEFT[1], FOOT_RIGHT[1]]] = j[:, [FOOT_RIGHT[1], FOOT_LEFT[1]]]
+    assert left_strides(swapped).tolist() == [23, 53, 83]

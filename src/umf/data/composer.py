@@ -8,8 +8,9 @@ from typing import Any
 
 import numpy as np
 
+from umf.data.pace import same_pace
 from umf.data.relations import check_record
-from umf.data.scene_relations import PACED, RELATIONS, Relation, same_pace
+from umf.data.scene_relations import PACED, RELATIONS, Relation
 from umf.data.scenes import MIN_FRAMES, Actor, build_scene
 
 

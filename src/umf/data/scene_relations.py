@@ -11,8 +11,8 @@ from typing import Any
 
 import numpy as np
 
-from umf.data.clip import FPS
-from umf.data.relations import CONTACT_DISTANCE, facing_dirs
+from umf.data.pace import in_step, mirrored_repeats
+from umf.data.relations import CONTACT_DISTANCE
 from umf.data.scenes import (
     MAX_FRAMES,
     MIN_FRAMES,
@@ -21,7 +21,6 @@ from umf.data.scenes import (
     heading_to,
     mirror_joints_np,
 )
-from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 
 NUMBER_WORDS = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven", 8: "eight"}
 
@@ -74,45 +73,6 @@ def _person(
 # (the composer) and the scene ends with the shortest clip, so nobody stops while the
 # others go on.
 PACED = ("walk_side_by_side", "run_side_by_side", "group_line")
-PACE_TOLERANCE = 0.15  # m/s between mean forward speeds: under 0.6 m apart after 4 s
-
-
-def pace(actor: Actor) -> float:
-    """Mean forward speed (m/s) from the first left stride (where a paced scene cuts the
-    clip, :func:`_in_step`) over at most ``MAX_FRAMES`` frames."""
-    first = left_strides(actor.joints)[:1]
-    start = int(first[0]) if first.size and len(actor.joints) - first[0] >= MIN_FRAMES else 0
-    travel = forward_travel(actor.joints[start : start + MAX_FRAMES])
-    return float(travel[-1]) / max(len(travel) - 1, 1) * FPS
-
-
-def same_pace(a: Actor, b: Actor, tolerance: float = PACE_TOLERANCE) -> bool:
-    """Whether two clips move forward at mean speeds within ``tolerance`` m/s."""
-    return abs(pace(a) - pace(b)) <= tolerance
-
-
-def left_strides(joints: np.ndarray, reach: float = 0.1) -> np.ndarray:
-    """Frames where the left foot is furthest ahead of the right along the body's facing
-    (local maxima above ``reach`` metres): the phase of a walk or a run, (K,)."""
-    fwd = facing_dirs(joints)
-    sep = joints[:, FOOT_LEFT[1], :][:, [0, 2]] - joints[:, FOOT_RIGHT[1], :][:, [0, 2]]
-    s = np.sum(sep * fwd, axis=-1)
-    peak = (s[1:-1] >= s[:-2]) & (s[1:-1] > s[2:]) & (s[1:-1] > reach)
-    return np.flatnonzero(peak) + 1
-
-
-def _in_step(actors: Sequence[Actor], mirrored: Sequence[bool]) -> list[int]:
-    """Start frames that begin everybody at their first left stride: people in step, so
-    that a partner's legs follow from the leader's (two walkers at a random phase to each
-    other teach a flow the average of all phases: legs that barely move). Everybody is cut
-    alike, so a run's start from rest is skipped by all. A clip with no stride, or too few
-    frames after it, starts at its first frame."""
-    starts = []
-    for a, m in zip(actors, mirrored, strict=True):
-        j = mirror_joints_np(a.joints) if m else a.joints
-        first = left_strides(j)[:1]
-        starts.append(int(first[0]) if first.size and len(j) - first[0] >= MIN_FRAMES else 0)
-    return starts
 
 
 def _paced_people(
@@ -120,8 +80,8 @@ def _paced_people(
 ) -> tuple[list[dict], int]:
     """People of a paced relation at ``xz`` (each first pelvis position), in step with the
     leader, a repeated clip mirrored; and the frames they all keep moving."""
-    mirrored = _mirrored_repeats(actors)
-    starts = _in_step(actors, mirrored)
+    mirrored = mirrored_repeats(actors)
+    starts = in_step(actors, mirrored)
     people = []
     for a, (x, z), m, s in zip(actors, xz, mirrored, starts, strict=True):
         j = mirror_joints_np(a.joints) if m else a.joints
@@ -129,12 +89,6 @@ def _paced_people(
         people.append(_person(a, 0.0, (x - float(at[0]), z - float(at[2])), start=s, mirrored=m))
     n = min(len(a.joints) - s for a, s in zip(actors, starts, strict=True))
     return people, int(min(n, MAX_FRAMES))
-
-
-def _mirrored_repeats(actors: Sequence[Actor]) -> list[bool]:
-    """Mirror every second appearance of a clip, so that a partner drawn from the leader's
-    own clip (no other at its pace) does not step in lockstep with it."""
-    return [sum(b is a for b in actors[:i]) % 2 == 1 for i, a in enumerate(actors)]
 
 
 def _length(

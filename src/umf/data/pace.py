@@ -1,0 +1,62 @@
+"""Keeping pace: for people who walk or run together, how fast a clip moves forward, where
+its strides fall, and where to cut it so that everybody starts in step
+(:mod:`umf.data.scene_relations` lays out the paced relations with these; the composer
+draws partners at the leader's pace)."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+
+import numpy as np
+
+from umf.data.clip import FPS
+from umf.data.relations import facing_dirs
+from umf.data.scenes import MAX_FRAMES, MIN_FRAMES, Actor, forward_travel, mirror_joints_np
+from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
+
+PACE_TOLERANCE = 0.15  # m/s between mean forward speeds: under 0.6 m apart after 4 s
+
+
+def pace(actor: Actor) -> float:
+    """Mean forward speed (m/s) from the first left stride (where a paced scene cuts the
+    clip, :func:`in_step`) over at most ``MAX_FRAMES`` frames."""
+    start = stride_start(actor.joints)
+    travel = forward_travel(actor.joints[start : start + MAX_FRAMES])
+    return float(travel[-1]) / max(len(travel) - 1, 1) * FPS
+
+
+def same_pace(a: Actor, b: Actor, tolerance: float = PACE_TOLERANCE) -> bool:
+    """Whether two clips move forward at mean speeds within ``tolerance`` m/s."""
+    return abs(pace(a) - pace(b)) <= tolerance
+
+
+def left_strides(joints: np.ndarray, reach: float = 0.1) -> np.ndarray:
+    """Frames where the left foot is furthest ahead of the right along the body's facing
+    (local maxima above ``reach`` metres): the phase of a walk or a run, (K,)."""
+    fwd = facing_dirs(joints)
+    sep = joints[:, FOOT_LEFT[1], :][:, [0, 2]] - joints[:, FOOT_RIGHT[1], :][:, [0, 2]]
+    s = np.sum(sep * fwd, axis=-1)
+    peak = (s[1:-1] >= s[:-2]) & (s[1:-1] > s[2:]) & (s[1:-1] > reach)
+    return np.flatnonzero(peak) + 1
+
+
+def stride_start(joints: np.ndarray) -> int:
+    """The first left stride of a clip, where a paced scene starts it; 0 for a clip with no
+    stride, or too few frames after it."""
+    first = left_strides(joints)[:1]
+    return int(first[0]) if first.size and len(joints) - first[0] >= MIN_FRAMES else 0
+
+
+def in_step(actors: Sequence[Actor], mirrored: Sequence[bool]) -> list[int]:
+    """Start frames that begin everybody at their first left stride: people in step, so
+    that a partner's legs follow from the leader's (two walkers at a random phase to each
+    other teach a flow the average of all phases: legs that barely move). Everybody is cut
+    alike, so a run's start from rest is skipped by all."""
+    return [stride_start(mirror_joints_np(a.joints) if m else a.joints)
+            for a, m in zip(actors, mirrored, strict=True)]  # fmt: skip
+
+
+def mirrored_repeats(actors: Sequence[Actor]) -> list[bool]:
+    """Mirror every second appearance of a clip, so that a partner drawn from the leader's
+    own clip (no other at its pace) is not its exact copy."""
+    return [sum(b is a for b in actors[:i]) % 2 == 1 for i, a in enumerate(actors)]
