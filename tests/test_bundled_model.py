@@ -158,6 +158,25 @@ def test_second_person_strides_beside_the_first(pipe):
     assert second[0] > 0.6 * first[0], (first, second)
 
 
+@pytest.mark.xfail(strict=True, reason="followers of a walking leader still glide: 0.69x its "
+                   "speed, 2 of 8 seeds (results/umf-small-bandai-20261204)")  # fmt: skip
+def test_followers_keep_pace_with_a_walking_leader(pipe):
+    """The reactions issue's target: in "Two people walk side by side." (4 s, seeds 0-7) the
+    follower's delivered start-to-end floor speed is within 20 % of the leader's and it ends
+    at most 1 m behind. Fails on the bundled model (strict: a model that passes must drop
+    the mark); python research/keep_pace.py gives the numbers."""
+    fps, missed = pipe.config.fps, []
+    for seed in range(8):
+        (scene,) = pipe("Two people walk side by side.", num_people=2, seconds=4.0, seed=seed)
+        p = np.asarray(scene.joints)[:, :, 0][..., [0, 2]]
+        speed = np.linalg.norm(p[:, -1] - p[:, 0], axis=-1) * fps / (p.shape[1] - 1)
+        heading = (p[0, -1] - p[0, 0]) / max(float(np.linalg.norm(p[0, -1] - p[0, 0])), 1e-6)
+        behind = float((p[0, -1] - p[1, -1]) @ heading)
+        if abs(speed[1] / speed[0] - 1.0) > 0.2 or behind > 1.0:
+            missed.append((seed, round(float(speed[1] / speed[0]), 2), round(behind, 2)))
+    assert not missed, missed
+
+
 def test_the_bundled_model_says_what_it_does_not_know(pipe):
     """It carries its vocabulary: trained wordings and close paraphrases are known, actions
     no corpus of it has are flagged (calibration: results/coverage/calibration.json)."""
