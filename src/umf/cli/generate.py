@@ -91,7 +91,9 @@ def generate(
     seconds: float = typer.Option(4.0, help="Duration (0.5-10 s)."),
     seed: int = typer.Option(0, help="Random seed (0 to 2^64-1)."),
     guidance: float | None = typer.Option(None, help="CFG scale, 0-20 (model default)."),
-    steps: str | None = typer.Option(None, help="P-Flow steps per stage: 45,5 (200 in all)."),
+    steps: str | None = typer.Option(
+        None, help="P-Flow steps per stage, e.g. 45,5 (200 in all; model default, bundled 5,5)."
+    ),
     sflow_steps: int | None = typer.Option(None, help=SFLOW_STEPS_HELP),
     batch: int = typer.Option(1, "--batch", "-b", help="Samples per prompt (1-256)."),
     prompts: Path | None = typer.Option(None, help="Text file: one prompt per line."),
