@@ -17,9 +17,10 @@ first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
 after it take about 2.5 h here (1.8 h of them the S-Flow; ``settle`` 20 min, the last,
 ``pace``, 18 min). ``pace`` was trained on a corpus of the current composer (partners of
-side-by-side scenes at the leader's pace and in step); the stages before it on the composer
-of their day, whose side-by-side partners were paired at random: a corpus prepared now gives
-every stage the new scenes.
+side-by-side scenes at the leader's pace and in step; but for its fallback, changed since,
+24 of 3,000 training scenes); the stages before it on the composer of their day, whose
+side-by-side partners were paired at random: a corpus prepared now gives every stage the
+new scenes.
 ``--dry-run`` prints the commands and runs nothing.
 
 Not bit-for-bit: the GPU stages ran with TF32 and the code changed between the steps, so

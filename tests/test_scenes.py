@@ -127,14 +127,30 @@ def test_paced_relations_pair_walkers_of_the_same_pace():
             group = slow if people[0] in slow else fast
             assert all(p in group for p in people), [p.id for p in people]
             assert all(p is not people[0] for p in people[1:])
-    # a leader with no partner at its pace walks beside its own clip, mirrored
+    # a leader with no partner at its pace walks beside its own clip
     a, b = _walker("a", 0.03), _walker("b", 0.05)
     for _ in range(10):
         lead, partner = C._pick_actors(rng, C.RELATIONS["walk_side_by_side"], 2, {"walk": [a, b]})
         assert partner is lead
-        layout = C.RELATIONS["walk_side_by_side"].layout(rng, [lead, partner])
-        assert [p["mirrored"] for p in layout["people"]] == [False, True]
-    assert S.forward_travel(slow[0].joints)[-1] > 0
+
+
+def test_a_repeated_clip_starts_a_stride_later_and_keeps_its_course(actors):
+    """The leader's own clip as its partner (no other at its pace) starts at its next left
+    stride, unmirrored: not a copy, and on a parallel course (a mirrored copy of a clip
+    that curves 5-7 degrees drifts 1.2 m away in its length)."""
+    from umf.data.pace import left_strides
+
+    walk = next(a for a in actors if a.id == "dataset-1_walk_normal_001")
+    rng = np.random.default_rng(0)
+    for name, n in (("walk_side_by_side", 2), ("group_line", 3)):
+        layout = C.RELATIONS[name].layout(rng, [walk] * n)
+        strides = left_strides(walk.joints)
+        assert [p["start"] for p in layout["people"]] == strides[:n].tolist()
+        assert not any(p["mirrored"] for p in layout["people"])
+        recipe = {"num_frames": layout["num_frames"], "people": layout["people"]}
+        j = S.build_scene(recipe, {walk.id: walk})
+        gap = np.linalg.norm(j[1:, :, 0, [0, 2]] - j[:1, :, 0, [0, 2]], axis=-1)
+        assert np.ptp(gap, axis=1).max() < 0.5, np.ptp(gap, axis=1)  # the gap holds
 
 
 def test_paced_scenes_keep_pace_to_the_end(actors):

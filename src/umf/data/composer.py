@@ -35,7 +35,7 @@ def _pick_actors(
         if not first:
             return None
         leader = first[int(rng.integers(len(first)))]
-        # no other clip at its pace: the leader's own clip, mirrored by the layout
+        # no other clip at its pace: the leader's own clip, a stride later (the layout)
         partners = [a for a in pools[leader.content] if a is not leader and same_pace(a, leader)]
         partners = partners or [leader]
         return [leader] + [partners[int(rng.integers(len(partners)))] for _ in range(n - 1)]

@@ -11,7 +11,7 @@ import numpy as np
 
 from umf.data.clip import FPS
 from umf.data.relations import facing_dirs
-from umf.data.scenes import MAX_FRAMES, MIN_FRAMES, Actor, forward_travel, mirror_joints_np
+from umf.data.scenes import MAX_FRAMES, MIN_FRAMES, Actor, forward_travel
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 
 PACE_TOLERANCE = 0.15  # m/s between mean forward speeds: under 0.6 m apart after 4 s
@@ -19,7 +19,8 @@ PACE_TOLERANCE = 0.15  # m/s between mean forward speeds: under 0.6 m apart afte
 
 def pace(actor: Actor) -> float:
     """Mean forward speed (m/s) from the first left stride (where a paced scene cuts the
-    clip, :func:`in_step`) over at most ``MAX_FRAMES`` frames."""
+    clip, :func:`in_step`) over at most ``MAX_FRAMES`` frames: the clip's own pace, not that
+    of the window a scene plays, which also ends with its partners' clips."""
     start = stride_start(actor.joints)
     travel = forward_travel(actor.joints[start : start + MAX_FRAMES])
     return float(travel[-1]) / max(len(travel) - 1, 1) * FPS
@@ -40,23 +41,18 @@ def left_strides(joints: np.ndarray, reach: float = 0.1) -> np.ndarray:
     return np.flatnonzero(peak) + 1
 
 
-def stride_start(joints: np.ndarray) -> int:
-    """The first left stride of a clip, where a paced scene starts it; 0 for a clip with no
-    stride, or too few frames after it."""
-    first = left_strides(joints)[:1]
-    return int(first[0]) if first.size and len(joints) - first[0] >= MIN_FRAMES else 0
+def stride_start(joints: np.ndarray, nth: int = 0) -> int:
+    """The ``nth`` left stride of a clip (0: the first), where a paced scene starts it; 0 for
+    a clip without that stride, or with too few frames after it."""
+    strides = left_strides(joints)[nth : nth + 1]
+    return int(strides[0]) if strides.size and len(joints) - strides[0] >= MIN_FRAMES else 0
 
 
-def in_step(actors: Sequence[Actor], mirrored: Sequence[bool]) -> list[int]:
-    """Start frames that begin everybody at their first left stride: people in step, so
-    that a partner's legs follow from the leader's (two walkers at a random phase to each
-    other teach a flow the average of all phases: legs that barely move). Everybody is cut
-    alike, so a run's start from rest is skipped by all."""
-    return [stride_start(mirror_joints_np(a.joints) if m else a.joints)
-            for a, m in zip(actors, mirrored, strict=True)]  # fmt: skip
-
-
-def mirrored_repeats(actors: Sequence[Actor]) -> list[bool]:
-    """Mirror every second appearance of a clip, so that a partner drawn from the leader's
-    own clip (no other at its pace) is not its exact copy."""
-    return [sum(b is a for b in actors[:i]) % 2 == 1 for i, a in enumerate(actors)]
+def in_step(actors: Sequence[Actor]) -> list[int]:
+    """Start frames that begin everybody at a left stride: people in step, so that a
+    partner's legs follow from the leader's (two walkers at a random phase to each other
+    teach a flow the average of all phases: legs that barely move). Everybody is cut alike,
+    so a run's start from rest is skipped by all. A clip that appears again (the leader's
+    own, where no other clip has its pace) starts a stride later each time, so that it is
+    not a copy; it keeps its heading and curve, where a mirrored copy would curve away."""
+    return [stride_start(a.joints, sum(b is a for b in actors[:i])) for i, a in enumerate(actors)]

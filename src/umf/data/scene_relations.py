@@ -11,7 +11,7 @@ from typing import Any
 
 import numpy as np
 
-from umf.data.pace import in_step, mirrored_repeats
+from umf.data.pace import in_step
 from umf.data.relations import CONTACT_DISTANCE
 from umf.data.scenes import (
     MAX_FRAMES,
@@ -19,7 +19,6 @@ from umf.data.scenes import (
     Actor,
     forward_travel,
     heading_to,
-    mirror_joints_np,
 )
 
 NUMBER_WORDS = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven", 8: "eight"}
@@ -79,14 +78,12 @@ def _paced_people(
     actors: Sequence[Actor], xz: Sequence[tuple[float, float]]
 ) -> tuple[list[dict], int]:
     """People of a paced relation at ``xz`` (each first pelvis position), in step with the
-    leader, a repeated clip mirrored; and the frames they all keep moving."""
-    mirrored = mirrored_repeats(actors)
-    starts = in_step(actors, mirrored)
+    leader; and the frames they all keep moving."""
+    starts = in_step(actors)
     people = []
-    for a, (x, z), m, s in zip(actors, xz, mirrored, starts, strict=True):
-        j = mirror_joints_np(a.joints) if m else a.joints
-        at = j[s, 0]  # a clip cut at frame s starts there: move it back to xz
-        people.append(_person(a, 0.0, (x - float(at[0]), z - float(at[2])), start=s, mirrored=m))
+    for a, (x, z), s in zip(actors, xz, starts, strict=True):
+        at = a.joints[s, 0]  # a clip cut at frame s starts there: move it back to xz
+        people.append(_person(a, 0.0, (x - float(at[0]), z - float(at[2])), start=s))
     n = min(len(a.joints) - s for a, s in zip(actors, starts, strict=True))
     return people, int(min(n, MAX_FRAMES))
 
