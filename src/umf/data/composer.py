@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from umf.data.pace import same_pace
+from umf.data.pace import partners_at_pace
 from umf.data.relations import check_record
 from umf.data.scene_relations import PACED, RELATIONS, Relation
 from umf.data.scenes import MIN_FRAMES, Actor, build_scene
@@ -16,8 +16,14 @@ from umf.data.scenes import MIN_FRAMES, Actor, build_scene
 
 # --------------------------------------------------------------------- composer
 def _pick_actors(
-    rng, relation: Relation, n: int, pools: dict[str, list[Actor]]
+    rng,
+    relation: Relation,
+    n: int,
+    pools: dict[str, list[Actor]],
+    paces: dict[str, float] | None = None,
 ) -> list[Actor] | None:
+    """The actors of one scene of ``relation``, or None when its roles cannot be filled;
+    ``paces``: clip paces already measured in this composition (filled as needed)."""
     chosen: list[Actor] = []
     roles = relation.roles(n)
     if relation.name == "audience":  # the group answers in kind: call -> respond, bow -> bow
@@ -36,7 +42,7 @@ def _pick_actors(
             return None
         leader = first[int(rng.integers(len(first)))]
         # no other clip at its pace: the leader's own clip, a stride later (the layout)
-        partners = [a for a in pools[leader.content] if a is not leader and same_pace(a, leader)]
+        partners = partners_at_pace(leader, pools[leader.content], {} if paces is None else paces)
         partners = partners or [leader]
         return [leader] + [partners[int(rng.integers(len(partners)))] for _ in range(n - 1)]
     for contents in roles:
@@ -56,10 +62,11 @@ def compose_scene(
     pools: dict[str, list[Actor]],
     actors_by_id: dict[str, Actor],
     max_tries: int = 20,
+    paces: dict[str, float] | None = None,
 ) -> tuple[dict[str, Any], np.ndarray] | None:
     """One valid scene (recipe, joints) of ``relation`` with ``n`` people, or None."""
     for _ in range(max_tries):
-        actors = _pick_actors(rng, relation, n, pools)
+        actors = _pick_actors(rng, relation, n, pools, paces)
         if actors is None:
             return None
         layout = relation.layout(rng, actors)
@@ -97,6 +104,7 @@ def compose_corpus(
     pools: dict[str, list[Actor]] = {}
     for a in actors:
         pools.setdefault(a.content, []).append(a)
+    paces: dict[str, float] = {}  # measured once per clip for the paced relations
     names = [r for r in (relations or RELATIONS) if set(RELATIONS[r].sizes) & set(sizes)]
     recipes: list[dict[str, Any]] = []
     failures = attempt = 0
@@ -104,13 +112,13 @@ def compose_corpus(
         rel = RELATIONS[names[attempt % len(names)]]
         attempt += 1
         n = int(rng.choice([s for s in sizes if s in rel.sizes]))
-        out = compose_scene(rng, rel, n, pools, by_id)
+        out = compose_scene(rng, rel, n, pools, by_id, paces=paces)
         if out is None:
             failures += 1
             if failures > 50 * max(num_scenes, 1):
                 break
             # a relation whose roles cannot be filled from this pool is dropped
-            if _pick_actors(rng, rel, n, pools) is None:
+            if _pick_actors(rng, rel, n, pools, paces) is None:
                 names.remove(rel.name)
             continue
         recipe, _ = out

@@ -26,9 +26,19 @@ def pace(actor: Actor) -> float:
     return float(travel[-1]) / max(len(travel) - 1, 1) * FPS
 
 
-def same_pace(a: Actor, b: Actor, tolerance: float = PACE_TOLERANCE) -> bool:
-    """Whether two clips move forward at mean speeds within ``tolerance`` m/s."""
-    return abs(pace(a) - pace(b)) <= tolerance
+def partners_at_pace(
+    leader: Actor, pool: Sequence[Actor], paces: dict[str, float], tolerance: float = PACE_TOLERANCE
+) -> list[Actor]:
+    """The clips of ``pool`` other than ``leader`` whose mean forward speed is within
+    ``tolerance`` m/s of the leader's. ``paces`` memoises :func:`pace` by clip id across the
+    calls of one composition (a pool is measured once, not at every scene drawn)."""
+
+    def of(a: Actor) -> float:
+        if a.id not in paces:
+            paces[a.id] = pace(a)
+        return paces[a.id]
+
+    return [a for a in pool if a is not leader and abs(of(a) - of(leader)) <= tolerance]
 
 
 def left_strides(joints: np.ndarray, reach: float = 0.1) -> np.ndarray:

@@ -13,13 +13,7 @@ import numpy as np
 
 from umf.data.pace import in_step
 from umf.data.relations import CONTACT_DISTANCE
-from umf.data.scenes import (
-    MAX_FRAMES,
-    MIN_FRAMES,
-    Actor,
-    forward_travel,
-    heading_to,
-)
+from umf.data.scenes import MAX_FRAMES, MIN_FRAMES, Actor, forward_travel, heading_to
 
 NUMBER_WORDS = {2: "two", 3: "three", 4: "four", 5: "five", 6: "six", 7: "seven", 8: "eight"}
 
