@@ -136,8 +136,8 @@ def test_paced_relations_pair_walkers_of_the_same_pace():
 
 def test_a_repeated_clip_starts_a_stride_later_and_keeps_its_course(actors):
     """The leader's own clip as its partner (no other at its pace) starts at its next left
-    stride, unmirrored: not a copy, and on a parallel course (a mirrored copy of a clip
-    that curves 5-7 degrees drifts 1.2 m away in its length)."""
+    stride, unmirrored: not a copy, and on a parallel course (a mirrored copy of these
+    curving walks, placed 0.8 m apart, ends 2.2-2.4 m away: research/paced_scenes.py)."""
     from umf.data.pace import left_strides
 
     walk = next(a for a in actors if a.id == "dataset-1_walk_normal_001")
