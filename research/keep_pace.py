@@ -51,7 +51,8 @@ def measure(model: Path | None, seeds: int) -> dict:
             v, ahead = pace(np.asarray(scene.joints), fps)
             rows.append({"seed": s, "leader": float(v[0]),
                          "decoded": (v_raw[1:] / v_raw[0]).tolist(),
-                         "delivered": (v[1:] / v[0]).tolist(), "ahead": ahead[1:].tolist()})  # fmt: skip
+                         "delivered": (v[1:] / v[0]).tolist(),
+                         "ahead": ahead[1:].tolist()})  # fmt: skip
         ratio = np.array([r["delivered"] for r in rows])
         ahead = np.array([r["ahead"] for r in rows])
         ok = (np.abs(ratio - 1) <= 0.2).all(axis=1) & (ahead >= -1.0).all(axis=1)
