@@ -32,13 +32,20 @@ PROMPT = "two people bow to each other"
 FREEMOTION_FPS = 30.0  # InterHuman's frame rate: 4 s = 120 frames, 10 s = 300
 
 
-def timed(fn, repeats: int) -> float:
-    """Median wall time of ``fn()`` over ``repeats`` runs after one warm-up run."""
+def no_sync() -> None:
+    """The CPU's work is done when a call returns: nothing to wait for."""
+
+
+def timed(fn, repeats: int, sync=no_sync) -> float:
+    """Median wall time of ``fn()`` over ``repeats`` runs after one warm-up run; ``sync``
+    waits for a device's queued work before each clock read (``torch.cuda.synchronize``)."""
     fn()
+    sync()
     times = []
     for _ in range(repeats):
         start = time.perf_counter()
         fn()
+        sync()
         times.append(time.perf_counter() - start)
     return statistics.median(times)
 
@@ -56,7 +63,7 @@ def flat_pflow(pipe):
     # one stage over the whole time axis, guided like the model's coarse stages
     cfg = dataclasses.replace(pipe.config.pflow, num_stages=1, starts=None, fine_guidance=None)
     p, r = pipe.vae.latent_shape
-    flat = PFlow(cfg, p, r, pipe.text_encoder.dim)
+    flat = PFlow(cfg, p, r, pipe.text_encoder.dim).to(pipe.device)
     missing, unexpected = flat.load_state_dict(pipe.pflow.state_dict(), strict=False)
     if unexpected or missing:
         shared = len(pipe.pflow.state_dict()) - len(unexpected)
@@ -71,19 +78,21 @@ def matmul_gflops(n: int = 2048, repeats: int = 5) -> float:
 
 
 @contextlib.contextmanager
-def stage_timer(pipe):
+def stage_timer(pipe, sync=no_sync):
     """Seconds spent in each stage of the calls made inside, by wrapping the pipeline's
-    text encoder, flows, VAE and clean-up (restored on exit)."""
+    text encoder, flows, VAE and clean-up (restored on exit; ``sync`` as in :func:`timed`)."""
     import umf.pipeline as pipeline_module
 
     spent: dict[str, float] = collections.defaultdict(float)
 
     def wrap(stage, fn):
         def timed_call(*args, **kwargs):
+            sync()
             start = time.perf_counter()
             try:
                 return fn(*args, **kwargs)
             finally:
+                sync()
                 spent[stage] += time.perf_counter() - start
 
         return timed_call
@@ -104,14 +113,18 @@ def stage_timer(pipe):
                 setattr(obj, name, old)
 
 
-def stage_profile(pipe, num_people: int, seconds: float, repeats: int) -> dict[str, float]:
-    """Median seconds per stage of one scene (and the rest, "other")."""
-    pipe(PROMPT, num_people=num_people, seconds=seconds)  # warm-up
+def stage_profile(
+    pipe, num_people: int, seconds: float, repeats: int, sync=no_sync, batch: int = 1
+) -> dict[str, float]:
+    """Median seconds per stage of one call of ``batch`` scenes (and the rest, "other")."""
+    prompts = [PROMPT] * batch
+    pipe(prompts, num_people=num_people, seconds=seconds)  # warm-up
     runs = []
     for _ in range(repeats):
-        with stage_timer(pipe) as spent:
+        with stage_timer(pipe, sync) as spent:
             start = time.perf_counter()
-            pipe(PROMPT, num_people=num_people, seconds=seconds)
+            pipe(prompts, num_people=num_people, seconds=seconds)
+            sync()
             total = time.perf_counter() - start
         runs.append({**spent, "other": total - sum(spent.values()), "total": total})
     return {k: statistics.median(r.get(k, 0.0) for r in runs) for k in runs[0]}
@@ -125,18 +138,21 @@ def paper_pipe(text_encoder):
     return UMFPipeline.build(family_config("paper"), text_encoder=text_encoder)
 
 
-def pyramid_vs_flat(pipe, repeats: int) -> tuple[float, float]:
-    """Seconds of P-Flow sampling with the pyramid and without it, equal total steps."""
-    text = pipe.text_encoder.encode([PROMPT])
-    uncond = pipe.text_encoder.encode([""])
+def pyramid_vs_flat(pipe, repeats: int, sync=no_sync, batch: int = 1) -> tuple[float, float]:
+    """Seconds of P-Flow sampling of ``batch`` prompts with the pyramid and without it,
+    equal total steps."""
+    text = pipe.text_encoder.encode([PROMPT] * batch)
+    uncond = pipe.text_encoder.encode([""] * batch)
     steps = list(pipe.config.pflow.steps)
     flat = flat_pflow(pipe)
 
     def run(model, st):
-        return lambda: model.sample(text, uncond, steps=st, generator=torch.Generator())
+        return lambda: model.sample(text, uncond, steps=st,
+                                    generator=torch.Generator(pipe.device))  # fmt: skip
 
     with torch.inference_mode():
-        return timed(run(pipe.pflow, steps), repeats), timed(run(flat, [sum(steps)]), repeats)
+        return (timed(run(pipe.pflow, steps), repeats, sync),
+                timed(run(flat, [sum(steps)]), repeats, sync))  # fmt: skip
 
 
 def freemotion_scene_s(net, frames: int, people: int, repeats: int) -> tuple[float, int]:
