@@ -197,3 +197,20 @@ def test_left_strides_find_the_left_foot_forward():
     swapped = j.copy()
     swapped[:, [FOOT_LEFT[1], FOOT_RIGHT[1]]] = j[:, [FOOT_RIGHT[1], FOOT_LEFT[1]]]
     assert left_strides(swapped).tolist() == [23, 53, 83]
+
+
+def test_side_by_side_captions_name_the_side_the_check_asks_for(actors):
+    # the relation checks read a scene's first caption: for a side-by-side pair it must say
+    # which side the second person keeps, or the "side" check asks for a coin flip
+    recipes = [r for r in C.compose_corpus(actors, 60, (2,), seed=11)
+               if r["relation"] in ("walk_side_by_side", "run_side_by_side")]  # fmt: skip
+    sides = set()
+    for r in recipes:
+        side = next(c["side"] for c in r["constraints"] if c["type"] == "side")
+        other = "right" if side == "left" else "left"
+        named = [c for c in r["captions"] if side in c or other in c]
+        assert r["captions"][0] in named and len(named) == 3
+        assert all(side in c and other not in c for c in named)
+        assert len(r["captions"]) - len(named) == 2  # and two wordings leave it open
+        sides.add(side)
+    assert sides == {"left", "right"}  # both sides occur, each named as itself

@@ -78,7 +78,7 @@ def compose_scene(
             "num_frames": int(layout["num_frames"]),
             "people": layout["people"],
             "constraints": layout["constraints"],
-            "captions": [c[0].upper() + c[1:] for c in relation.captions(rng, actors, n)],
+            "captions": [c[0].upper() + c[1:] for c in relation.captions(rng, actors, n, layout)],
         }
         joints = build_scene(recipe, actors_by_id)
         if all(r.passed for r in check_record(joints, recipe)):

@@ -43,7 +43,7 @@ class Relation:
     name: str
     roles: Callable[[int], list[tuple[str, ...]]]  # per-person allowed contents for N people
     layout: Callable[..., dict[str, Any] | None]
-    captions: Callable[..., list[str]]
+    captions: Callable[..., list[str]]  # (rng, actors, n, layout): wordings, [0] checked
     sizes: tuple[int, ...]  # numbers of people it supports
 
 
@@ -127,7 +127,7 @@ def _face_each_other(rng, actors, lag: int | None):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _greet_captions(rng, actors, n):
+def _greet_captions(rng, actors, n, layout):
     words = {a.content for a in actors}
     if words == {"bow"}:
         core = [
@@ -150,7 +150,7 @@ def _greet_captions(rng, actors, n):
     return core
 
 
-def _bow_back_captions(rng, actors, n):
+def _bow_back_captions(rng, actors, n, layout):
     return [
         "one person bows and the other bows back.",
         "a person bows to someone, who then returns the bow.",
@@ -172,11 +172,16 @@ def _side_by_side(rng, actors, spacing=(0.7, 1.1)):
     return {"num_frames": n, "people": people, "constraints": cons, "side": side}
 
 
-def _walk_together_captions(rng, actors, n):
+def _walk_together_captions(rng, actors, n, layout):
+    """The first three name the side the second person keeps (the "side" check reads the
+    first caption); the last two leave it open, as most users' prompts do."""
     verb = "run" if actors[0].content in RUNS else "walk"
+    side = layout["side"]
     return [
+        f"two people {verb} side by side, the second person on the first one's {side}.",
+        f"a person {verb}s forward with another person at their {side} side.",
+        f"two people {verb} next to each other, the second keeping to the {side} of the first.",
         f"two people {verb} side by side.",
-        f"two people {verb} next to each other.",
         f"a pair of people {verb} forward together, shoulder to shoulder.",
     ]
 
@@ -201,7 +206,7 @@ def _follow(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _follow_captions(rng, actors, n):
+def _follow_captions(rng, actors, n, layout):
     return [
         "one person follows another.",
         "a person walks behind another person, following them.",
@@ -231,7 +236,7 @@ def _call_approach(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _call_approach_captions(rng, actors, n):
+def _call_approach_captions(rng, actors, n, layout):
     return [
         "one person calls out and the other walks over to them.",
         "a person beckons someone, who walks towards them.",
@@ -239,7 +244,7 @@ def _call_approach_captions(rng, actors, n):
     ]
 
 
-def _call_respond_captions(rng, actors, n):
+def _call_respond_captions(rng, actors, n, layout):
     return [
         "one person calls out to another, who responds.",
         "a person calls someone and the other answers.",
@@ -264,7 +269,7 @@ def _step_back(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _step_back_captions(rng, actors, n):
+def _step_back_captions(rng, actors, n, layout):
     verb = {"kick": "kicks", "punch": "throws a punch", "slash": "slashes"}[actors[0].content]
     return [
         f"one person {verb} and the other steps back.",
@@ -277,7 +282,7 @@ def _spar(rng, actors):
     return _face_each_other(rng, actors, lag=int(rng.integers(10, 30)))
 
 
-def _spar_captions(rng, actors, n):
+def _spar_captions(rng, actors, n, layout):
     return [
         "two people face each other and fight.",
         "two people spar, attacking each other in turn.",
@@ -298,7 +303,7 @@ def _mirror(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _mirror_captions(rng, actors, n):
+def _mirror_captions(rng, actors, n, layout):
     return [
         "two people face each other and mirror each other's movements.",
         "facing each other, two people move like mirror images.",
@@ -320,7 +325,7 @@ def _part_ways(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _part_captions(rng, actors, n):
+def _part_captions(rng, actors, n, layout):
     return [
         "two people walk away from each other.",
         "two people part ways, walking in opposite directions.",
@@ -347,7 +352,7 @@ def _toward_each_other(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _toward_captions(rng, actors, n):
+def _toward_captions(rng, actors, n, layout):
     return [
         "two people walk towards each other.",
         "two people approach each other from opposite sides.",
@@ -368,7 +373,7 @@ def _line(rng, actors, spacing=(0.8, 1.1)):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _line_captions(rng, actors, n):
+def _line_captions(rng, actors, n, layout):
     k = NUMBER_WORDS[n]
     verb = "run" if actors[0].content in RUNS else "walk"
     return [
@@ -399,7 +404,7 @@ def _single_file(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _single_file_captions(rng, actors, n):
+def _single_file_captions(rng, actors, n, layout):
     k = NUMBER_WORDS[n]
     return [
         f"{k} people walk in single file.",
@@ -428,7 +433,7 @@ def _circle(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _circle_captions(rng, actors, n):
+def _circle_captions(rng, actors, n, layout):
     k = NUMBER_WORDS[n]
     what = "bow" if all(a.content == "bow" for a in actors) else "greet each other"
     return [
@@ -460,7 +465,7 @@ def _audience(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _audience_captions(rng, actors, n):
+def _audience_captions(rng, actors, n, layout):
     k = NUMBER_WORDS[n - 1]
     lead = actors[0].content
     if lead == "call":
@@ -499,7 +504,7 @@ def _gather(rng, actors):
     return {"num_frames": n, "people": people, "constraints": cons}
 
 
-def _gather_captions(rng, actors, n):
+def _gather_captions(rng, actors, n, layout):
     k = NUMBER_WORDS[n - 1]
     return [
         f"a person calls and {k} people walk over to them.",
