@@ -9,7 +9,7 @@ OUT    ?= out
 # Full Bandai archives when present (../shared), else the bundled sample clips.
 BANDAI ?= $(firstword $(wildcard ../shared/data/bandai) data/bandai-sample)
 
-.PHONY: install demo serve test test-slow bench mutation mutation-rerun lint format corpus clean
+.PHONY: install demo serve test test-slow bench mutation mutation-rerun mutation-sample lint format corpus clean
 
 $(STAMP): pyproject.toml requirements.lock
 	$(PYTHON) -m venv $(VENV)
@@ -70,6 +70,17 @@ mutation-rerun: $(STAMP)
 	rm -rf mutants
 	$(MUTMUT_RUN) $$($(BIN)/python scripts/mutation_report.py --previous $(MUTATION_PREVIOUS) --names)
 	$(MUTATION_REPORT) --previous $(MUTATION_PREVIOUS)
+
+# One module too slow to run whole (umf.pipeline: each mutant runs the end-to-end tests) scored
+# on a seeded sample of its mutants, beside results/mutation's other modules.
+MUTATION_SAMPLE ?= umf.pipeline
+MUTATION_COUNT ?= 24
+mutation-sample: $(STAMP)
+	$(BIN)/pip install --quiet -c requirements.lock -e ".[mutation]"
+	rm -rf mutants
+	$(MUTMUT_RUN) $$($(BIN)/python scripts/mutation_report.py --sample $(MUTATION_SAMPLE) \
+		--count $(MUTATION_COUNT) --names)
+	$(MUTATION_REPORT) --previous $(MUTATION_PREVIOUS) --sample $(MUTATION_SAMPLE)
 
 # The full corpus: Bandai from ../shared/data/bandai (or BANDAI=...), and where ../shared is
 # present (or MOCAP_DATA=...) the real two-person takes (CMU salsa, CMU handshake) and the

@@ -3,6 +3,7 @@ surviving mutant listed and either explained as equivalent or left to be killed.
 
     python scripts/mutation_report.py [--mutants mutants] [--out results/mutation]
         [--previous results/mutation/mutation.json]   # a rerun of that report's survivors
+        [--sample umf.pipeline [--count 24 --seed 0]]  # a seeded sample of one module
 
 Reads the ``*.meta`` files mutmut 3 leaves under ``mutants/`` (one exit code per mutant:
 1 the tests failed, the mutant is killed; 0 they passed, it survived; 33 no test covers
@@ -15,6 +16,13 @@ Writes ``README.md`` and ``mutation.json`` under ``--out``.
 earlier report of the same source (``make mutation-rerun``: a full run takes hours here,
 a rerun of the few hundred survivors minutes); every mutant that run killed keeps its
 outcome, every survivor takes the rerun's.
+
+``--sample MODULE``: a module too slow to run whole (``umf.pipeline``: each mutant runs the
+end-to-end tests, a few minutes, 821 mutants) is scored on a seeded random sample of
+``--count`` of its mutants (``make mutation-sample``); with ``--names`` the sample is
+printed (mutmut's own generator numbers the mutants, so the names are the run's), and the
+report gives the sampled module's score with a 95 % interval (Wilson), every other module
+carried from ``--previous``.
 """
 
 from __future__ import annotations
@@ -23,6 +31,8 @@ import argparse
 import ast
 import difflib
 import json
+import math
+import random
 import re
 import sys
 from pathlib import Path
@@ -328,6 +338,55 @@ def carry_over(codes: dict[str, int | None], previous: dict) -> tuple[dict, dict
     return merged, carried
 
 
+def module_names(module: str, root: Path = Path("src")) -> list[str]:
+    """Every mutant mutmut makes of ``module`` (``umf.pipeline``), named as its run names
+    them: its own generator applied to the module's source."""
+    import io
+
+    import mutmut.__main__ as mm
+
+    path = root.joinpath(*module.split(".")).with_suffix(".py")
+    made = mm.write_all_mutants_to_file(out=io.StringIO(), source=path.read_text(),
+                                        filename=path)  # fmt: skip
+    return sorted(mm.get_mutant_name(path, n) for n in made.mutant_names)
+
+
+def sample_names(names: list[str], count: int, seed: int) -> list[str]:
+    """A seeded uniform sample of ``count`` of ``names`` (all of them if fewer), sorted."""
+    return sorted(random.Random(seed).sample(sorted(names), min(count, len(names))))
+
+
+def wilson(caught: int, judged: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a proportion: a sampled module's score, which a
+    normal interval would push past 100 % when few mutants survive."""
+    if judged == 0:
+        return 0.0, 1.0
+    p = caught / judged
+    centre = (p + z * z / (2 * judged)) / (1 + z * z / judged)
+    spread = math.sqrt(p * (1 - p) / judged + z * z / (4 * judged * judged))
+    half = z * spread / (1 + z * z / judged)
+    return max(0.0, centre - half), min(1.0, centre + half)
+
+
+def carry_sample(
+    codes: dict[str, int | None], previous: dict, module: str, population: int
+) -> tuple[dict, dict, dict]:
+    """(codes, carried, sample): a sampled run of ``module`` beside ``previous``, whose
+    other modules it leaves as they were (their killed and timeout counts carried, their
+    survivors kept as survivors); ``sample`` records the sample's size and population."""
+    run = {k: v for k, v in codes.items() if v is not None}
+    if stray := sorted(k for k in run if module_of(k) != module):
+        raise ValueError(f"{stray[0]} was run but is not a mutant of the sampled {module}")
+    merged, carried = dict(run), {}
+    for name, m in previous["modules"].items():
+        if name == module:
+            continue
+        carried[name] = {"killed": m["killed"], "timeout": m["timeout"]}
+        for survivor in [*m["survivors"], *m.get("equivalents", {})]:
+            merged.setdefault(survivor, 0)
+    return merged, carried, {module: {"sampled": len(run), "population": population}}
+
+
 def score(
     codes: dict[str, int | None],
     diffs: dict[str, str] | None = None,
@@ -439,12 +498,18 @@ def markdown(modules: dict, diffs: dict[str, str]) -> str:
     for name, m in modules.items():
         run = m["killed"] + m["timeout"] + m["survived"] + m["no tests"] + m["equivalent"]
         pct = "—" if m["score"] is None else f"{100 * m['score']:.1f} %"
+        if "population" in m:  # a sample: its size, the population, the interval
+            lo, hi = m["interval"]
+            run = f"{run} of {m['population']} (a sample)"
+            pct += f" (95 %: {100 * lo:.0f}-{100 * hi:.0f} %)"
         lines.append(f"| `{name}` | {run} | {m['killed']} | {m['timeout']} | {m['survived']} "
                      f"| {m['no tests']} | {m['equivalent']} | {pct} |")  # fmt: skip
-    caught = sum(m["killed"] + m["timeout"] for m in modules.values())
-    judged = caught + sum(m["survived"] + m["no tests"] for m in modules.values())
+    whole = [m for m in modules.values() if "population" not in m]
+    caught = sum(m["killed"] + m["timeout"] for m in whole)
+    judged = caught + sum(m["survived"] + m["no tests"] for m in whole)
     if judged:
-        lines.append(f"| **all** | | | | | | | **{100 * caught / judged:.1f} %** |")
+        label = "**all**" if len(whole) == len(modules) else "**all run whole**"
+        lines.append(f"| {label} | | | | | | | **{100 * caught / judged:.1f} %** |")
     survivors = [s for m in modules.values() for s in m["survivors"]]
     lines += ["", f"## Surviving mutants ({len(survivors)})", ""]
     lines += [f"- `{s}`: `{diffs.get(s, '')}`" for s in survivors] or ["None."]
@@ -467,10 +532,16 @@ def main() -> None:
     ap.add_argument(
         "--names",
         action="store_true",
-        help="print the mutants a rerun of --previous checks, and exit",
+        help="print the mutants a rerun of --previous (or --sample) checks, and exit",
     )
+    ap.add_argument("--sample", default=None, help="score one module on a seeded sample")
+    ap.add_argument("--count", type=int, default=24, help="mutants in the sample")
+    ap.add_argument("--seed", type=int, default=0, help="the sample's seed")
     args = ap.parse_args()
     previous = json.loads(args.previous.read_text()) if args.previous else None
+    if args.sample and args.names:
+        print("\n".join(sample_names(module_names(args.sample), args.count, args.seed)))
+        return
     if args.names:
         if previous is None:
             sys.exit("error: --names needs --previous")
@@ -479,12 +550,17 @@ def main() -> None:
     codes = read_results(args.mutants)
     if not codes:
         sys.exit(f"error: no mutmut results under {args.mutants} (run `make mutation`)")
-    carried = None
-    if previous is not None:
-        try:
+    carried, sample = None, {}
+    if args.sample and previous is None:
+        sys.exit("error: --sample needs --previous (the report its other modules come from)")
+    try:
+        if args.sample:
+            population = len(module_names(args.sample))
+            codes, carried, sample = carry_sample(codes, previous, args.sample, population)
+        elif previous is not None:
             codes, carried = carry_over(codes, previous)
-        except ValueError as e:
-            sys.exit(f"error: {e}")
+    except ValueError as e:
+        sys.exit(f"error: {e}")
     sources = mutant_sources(args.mutants)
     pairs = {name: changed_pair(name, sources) for name, code in codes.items()
              if classify(code) in ("survived", "no tests")}  # fmt: skip
@@ -493,6 +569,14 @@ def main() -> None:
         diffs = {name: new or previous["diffs"].get(name, "") for name, new in diffs.items()}
     originals = {name: old for name, (old, _) in pairs.items()}
     modules = score(codes, diffs, originals=originals, carried=carried)
+    for name, extra in sample.items():
+        m = modules.setdefault(name, {"killed": 0, "survived": 0, "timeout": 0, "no tests": 0,
+                                      "not run": 0, "equivalent": 0, "survivors": [],
+                                      "score": None})  # fmt: skip
+        caught = m["killed"] + m["timeout"]
+        lo, hi = wilson(caught, caught + m["survived"] + m["no tests"])
+        m.update(extra, interval=[round(lo, 4), round(hi, 4)])
+        m["not run"] = extra["population"] - extra["sampled"]
     args.out.mkdir(parents=True, exist_ok=True)
     report = {"modules": modules, "diffs": diffs}
     (args.out / "mutation.json").write_text(json.dumps(report, indent=1) + "\n")

@@ -149,3 +149,39 @@ def test_a_rerun_of_the_survivors_keeps_the_earlier_kills(tmp_path):
     assert noise["score"] == round(20 / 22, 4)
     with pytest.raises(ValueError, match=f"{name}9 was rerun but is no survivor"):
         report.carry_over({f"{name}9": 1}, previous)  # killed before: it would count twice
+
+
+def test_a_sampled_module_is_scored_beside_the_earlier_report():
+    report = load_script("mutation_report")
+    names = [f"umf.pipeline.x_f__mutmut_{i}" for i in range(1, 101)]
+    sample = report.sample_names(names, 10, seed=3)
+    assert sample == sorted(sample) and len(set(sample)) == 10 and set(sample) <= set(names)
+    assert sample == report.sample_names(list(reversed(names)), 10, seed=3)  # seeded, ordered
+    assert sample != report.sample_names(names, 10, seed=4)
+    noise = "umf.flows.noise.x_randn__mutmut_"
+    previous = {"modules": {
+        "umf.flows.noise": {"killed": 18, "survived": 1, "timeout": 1, "no tests": 0,
+                            "not run": 0, "equivalent": 1, "survivors": [f"{noise}1"],
+                            "equivalents": {f"{noise}2": "device"}},
+        "umf.pipeline": {"killed": 0, "survived": 0, "timeout": 0, "no tests": 0,
+                         "not run": 0, "equivalent": 0, "survivors": []}},
+        "diffs": {f"{noise}1": "a = 1", f"{noise}2": "d = 4"}}  # fmt: skip
+    codes = {n: None for n in names} | {sample[0]: 0} | {n: 1 for n in sample[1:]}
+    merged, carried, extra = report.carry_sample(codes, previous, "umf.pipeline", 100)
+    assert merged == {f"{noise}1": 0, f"{noise}2": 0, sample[0]: 0} | {n: 1 for n in sample[1:]}
+    assert carried == {"umf.flows.noise": {"killed": 18, "timeout": 1}}
+    assert extra == {"umf.pipeline": {"sampled": 10, "population": 100}}
+    with pytest.raises(ValueError, match="is not a mutant of the sampled umf.pipeline"):
+        report.carry_sample({f"{noise}7": 1}, previous, "umf.pipeline", 100)
+    lo, hi = report.wilson(9, 10)
+    assert 0.59 < lo < 0.6 and 0.98 < hi < 0.99  # Wilson's interval for 9 of 10
+    assert report.wilson(10, 10)[1] == 1.0 and report.wilson(0, 0) == (0.0, 1.0)
+
+
+def test_the_sample_names_are_mutmuts_own():
+    pytest.importorskip("mutmut")
+    report = load_script("mutation_report")
+    names = report.module_names("umf.flows.noise")
+    assert names and all(n.startswith("umf.flows.noise.x_") for n in names)
+    assert all(report.module_of(n) == "umf.flows.noise" for n in names)
+    assert len(set(names)) == len(names)
