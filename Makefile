@@ -75,11 +75,12 @@ mutation-rerun: $(STAMP)
 # on a seeded sample of its mutants, beside results/mutation's other modules.
 MUTATION_SAMPLE ?= umf.pipeline
 MUTATION_COUNT ?= 24
+MUTATION_SEED ?= 0
 mutation-sample: $(STAMP)
 	$(BIN)/pip install --quiet -c requirements.lock -e ".[mutation]"
 	rm -rf mutants
 	$(MUTMUT_RUN) $$($(BIN)/python scripts/mutation_report.py --sample $(MUTATION_SAMPLE) \
-		--count $(MUTATION_COUNT) --names)
+		--count $(MUTATION_COUNT) --seed $(MUTATION_SEED) --names)
 	$(MUTATION_REPORT) --previous $(MUTATION_PREVIOUS) --sample $(MUTATION_SAMPLE)
 
 # The full corpus: Bandai from ../shared/data/bandai (or BANDAI=...), and where ../shared is

@@ -99,7 +99,8 @@ def stage_timer(pipe, sync=no_sync):
 
     targets = [(pipe.text_encoder, "encode", "text"), (pipe.pflow, "sample", "P-Flow"),
                (pipe.sflow, "sample", "S-Flow"), (pipe, "_decode_raw", "VAE"),
-               (pipe, "_encode", "VAE"), (pipeline_module, "clean_up", "clean-up")]  # fmt: skip
+               (pipe, "_encode", "VAE"),
+               (pipeline_module, "clean_up_scenes", "clean-up")]  # fmt: skip
     saved = [(obj, name, obj.__dict__.get(name)) for obj, name, _ in targets]
     for obj, name, stage in targets:
         setattr(obj, name, wrap(stage, getattr(obj, name)))

@@ -15,6 +15,8 @@ per batch (1, 64) and people (2, 8), 4 s of motion:
   the same run;
 - P-Flow with its pyramid against the same network without it (``benchmark.flat_pflow``)
   at equal steps, per family and batch;
+- the clean-up of the last batch fitted in one solve on the device against scene by
+  scene on the CPU: seconds and the largest joint difference;
 - where the bundled model's default call spends its time (text, P-Flow, S-Flow, VAE,
   clean-up), per batch;
 - the FreeMotion-class baseline (``umf.eval.freemotion``, random weights) at N = 2 and 8,
@@ -114,6 +116,56 @@ def family_rows(pipe, family: str, timed, repeats: int, batches, peoples, full_b
     return rows
 
 
+def fit_agreement(pipe, timed, batch: int) -> dict:
+    """The clean-up of ``batch`` generated two-person scenes both ways: every person of
+    every scene fitted in one solve on ``pipe``'s device, and scene by scene on the CPU
+    (what the pipeline did before); seconds of each and the largest joint difference."""
+    import numpy as np
+
+    from umf.pipeline import clean_up_scenes
+    from umf.representation import CONTACT
+
+    scenes = pipe([PROMPT] * batch, num_people=2, seconds=4.0, fit=False, separate=False)
+    decoded = np.stack([s.joints for s in scenes])
+    contacts = np.stack([s.features[..., CONTACT] for s in scenes])
+    merged = functools.partial(clean_up_scenes, decoded, contacts, device=pipe.device, merge=True)
+    apart = functools.partial(clean_up_scenes, decoded, contacts, merge=False)
+    one, two = merged(), apart()
+    pairs = zip(one[1], two[1], strict=True)
+    gap = max(float(np.abs(a.joints() - b.joints()).max()) for a, b in pairs)
+    row = {"batch": batch, "merged_on_device_s": round(timed(merged, 3), 4),
+           "scene_by_scene_cpu_s": round(timed(apart, 1), 4),
+           "max_joint_gap_mm": gap * 1000}  # fmt: skip
+    print(f"  clean-up of {batch} scenes: one fit on {pipe.device} {row['merged_on_device_s']:.3f}"
+          f" s, scene by scene on the CPU {row['scene_by_scene_cpu_s']:.3f} s; joints agree "
+          f"within {row['max_joint_gap_mm']:.4f} mm", flush=True)  # fmt: skip
+    return row
+
+
+def profile_clean_up(pipe, batch: int, top: int = 25) -> None:
+    """cProfile of one merged clean-up of ``batch`` two-person scenes on ``pipe``'s device,
+    the functions by their own time (run with CUDA_LAUNCH_BLOCKING=1 so that a kernel's
+    time lands on the call that launched it)."""
+    import cProfile
+    import pstats
+
+    import numpy as np
+
+    from umf.pipeline import clean_up_scenes
+    from umf.representation import CONTACT
+
+    scenes = pipe([PROMPT] * batch, num_people=2, seconds=4.0, fit=False, separate=False)
+    decoded = np.stack([s.joints for s in scenes])
+    contacts = np.stack([s.features[..., CONTACT] for s in scenes])
+    clean_up_scenes(decoded, contacts, device=pipe.device, merge=True)  # warm-up
+    prof = cProfile.Profile()
+    prof.enable()
+    clean_up_scenes(decoded, contacts, device=pipe.device, merge=True)
+    prof.disable()
+    pstats.Stats(prof).sort_stats("tottime").print_stats(top)
+    pstats.Stats(prof).sort_stats("cumtime").print_stats(top)
+
+
 def compiled_rows(pipe, timed, repeats: int, batches) -> list[dict]:
     """The bundled model's generator (N = 2) with the P-Flow's and S-Flow's transformers
     under ``torch.compile``: seconds of the first call (the compilation) and after it."""
@@ -143,6 +195,11 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--people", type=int, nargs="+", default=[2, 8])
     ap.add_argument("--out", type=Path, default=None, help="write the figures as JSON")
     ap.add_argument(
+        "--profile-clean-up",
+        action="store_true",
+        help="only profile (cProfile) the merged clean-up of a batch of the last size, and exit",
+    )
+    ap.add_argument(
         "--compile",
         action="store_true",
         help="then time the bundled model with its flows' networks compiled",
@@ -156,6 +213,9 @@ def main(argv: list[str] | None = None) -> dict:
     from umf.pipeline import UMFPipeline
 
     timed, sync = synced_timer(device)
+    if args.profile_clean_up:
+        profile_clean_up(UMFPipeline.from_pretrained(args.model).to(device), args.batches[-1])
+        return {}
     name = torch.cuda.get_device_name(device) if device.type == "cuda" else platform.processor()
     print(f"device {device} ({name}); torch {torch.__version__}", flush=True)
     small = UMFPipeline.from_pretrained(args.model).to(device)
@@ -182,6 +242,7 @@ def main(argv: list[str] | None = None) -> dict:
             + ", ".join(f"{k} {v * 1000:.0f} ms" for k, v in prof.items()),
             flush=True,
         )
+    agreement = fit_agreement(small, timed, args.batches[-1])
     base = {n: freemotion_s(device, timed, n, round(4.0 * FREEMOTION_FPS)) for n in args.people}
     rates = matmul_rates(device, timed)
 
@@ -209,6 +270,7 @@ def main(argv: list[str] | None = None) -> dict:
         "sflow_steps": small.config.sflow.steps,
         "rows": rows,
         "pyramid_vs_flat": pyramid,
+        "clean_up": agreement,
         "stage_s": stages,
         "freemotion_s": {str(n): round(s, 4) for n, s in base.items()},
         "freemotion_speedup": speedup,

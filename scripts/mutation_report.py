@@ -198,9 +198,15 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         "pygltflib's Asset() defaults to version 2.0",
     # kinematics (session 27)
     ("umf.kinematics.x__lm_step",
+     "eye = torch.eye(normal.shape[+1], device=normal.device)"):
+        "normal is (B, n, n): shape[1] is shape[-1]",
+    ("umf.kinematics.x__lm_step",  # the same line before session 29
      "normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[+1])"):
         "normal is (B, n, n): shape[1] is shape[-1]",
     ("umf.kinematics.x__lm_step",
+     "eye = torch.eye(normal.shape[-2], device=normal.device)"):
+        "normal is square: shape[-2] is shape[-1]",
+    ("umf.kinematics.x__lm_step",  # the same line before session 29
      "normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[-2])"):
         "normal is square: shape[-2] is shape[-1]",
     ("umf.kinematics.x__lm_step",

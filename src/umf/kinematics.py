@@ -251,7 +251,7 @@ def normal_equations(pos: Tensor, res: Tensor, weight: Tensor) -> tuple[Tensor, 
     below = torch.from_numpy(_BELOW).to(pos)
     lever = (pos[:, :, None, :] - pos[:, None, list(DRIVERS), :]) * below[None, :, :, None]
     j_rot = -_skew(lever.float()).permute(0, 1, 3, 2, 4).reshape(b, 66, 3 * len(DRIVERS))
-    j_root = torch.eye(3).repeat(NUM_JOINTS, 1).expand(b, -1, -1)
+    j_root = torch.eye(3, device=pos.device).repeat(NUM_JOINTS, 1).expand(b, -1, -1)
     jac = torch.cat([j_root, j_rot], dim=-1)  # (B, 66, 3 + 3D)
     w = weight.float().repeat_interleave(3, dim=-1)[..., None]  # (B, 66, 1)
     jtw = jac.transpose(1, 2) * w.transpose(1, 2)
@@ -272,7 +272,8 @@ def _lm_step(
     glob = global_rotations(local)
     pos = forward_kinematics(local, root, offsets)
     normal, grad = normal_equations(pos, target - pos, weight)
-    normal = normal + damping.float()[:, None, None] * torch.eye(normal.shape[-1])
+    eye = torch.eye(normal.shape[-1], device=normal.device)
+    normal = normal + damping.float()[:, None, None] * eye
     normal[:, [0, 2], [0, 2]] += PINNED_DAMPING  # the pelvis keeps its horizontal path
     chol = torch.linalg.cholesky(normal)
     step = torch.cholesky_solve(grad[..., None], chol)[..., 0].to(local)
@@ -313,7 +314,7 @@ def refine(
     out_local, out_root = [], []
     for s in range(0, flat[1].shape[0], BLOCK):
         loc, rt, off, tg, wt = (x[s : s + BLOCK] for x in flat)
-        lam = torch.full(rt.shape[:1], damping, dtype=rt.dtype)
+        lam = torch.full(rt.shape[:1], damping, dtype=rt.dtype, device=rt.device)
         cost = _cost(loc, rt, off, tg, wt)
         for _ in range(iterations):
             new_loc, new_rt = _lm_step(loc, rt, off, tg, wt, lam)
@@ -336,6 +337,7 @@ def fit_bodies(
     clean: Sequence[bool] | bool = True,
     bones: str = "fit",
     iterations: int = ITERATIONS,
+    device: str | torch.device | None = None,
 ) -> Bodies:
     """Rigid bodies for N people's joints (N, T, 22, 3): see the module docstring.
 
@@ -347,6 +349,8 @@ def fit_bodies(
         clean: per person (or for all): pin planted feet and keep them off the floor.
         bones: ``"fit"`` (each person's mean decoded bone lengths) or ``"default"``.
         iterations: refinement steps (0: inverse kinematics only).
+        device: where the inverse kinematics and refinement run (default the CPU). On a
+            GPU, thousands of poses solve at once: fit many scenes' people in one call.
     """
     joints = np.asarray(joints, dtype=np.float64)
     if joints.ndim != 4 or joints.shape[-2:] != (NUM_JOINTS, 3) or joints.shape[1] < 1:
@@ -355,12 +359,12 @@ def fit_bodies(
         raise ValueError(f"bones must be 'fit' or 'default', got {bones!r}")
     n = joints.shape[0]
     flags = [bool(clean)] * n if isinstance(clean, bool) else [bool(c) for c in clean]
-    data = torch.from_numpy(joints)
+    data = torch.from_numpy(joints).to(device or "cpu")
     if bones == "fit":
         offsets = torch.stack([fit_offsets(p) for p in data])
     else:
-        offsets = default_offsets(torch.float64).expand(n, -1, -1).clone()
-    local = torch.stack([inverse_kinematics(p, o) for p, o in zip(data, offsets, strict=True)])
+        offsets = default_offsets(torch.float64, data.device).expand(n, -1, -1).clone()
+    local = inverse_kinematics(data, offsets[:, None])  # everybody at once
     root = data[:, :, 0].clone()
     targets, weights = [], []
     for i in range(n):
@@ -370,9 +374,11 @@ def fit_bodies(
         targets.append(tg)
         weights.append(wt)
     if iterations > 0:
-        local, root = refine(local, root, offsets[:, None], torch.from_numpy(np.stack(targets)),
-                             torch.from_numpy(np.stack(weights)), iterations)  # fmt: skip
-    bodies = Bodies(offsets.numpy(), local.numpy(), root.numpy())
+        local, root = refine(local, root, offsets[:, None],
+                             torch.from_numpy(np.stack(targets)).to(data.device),
+                             torch.from_numpy(np.stack(weights)).to(data.device),
+                             iterations)  # fmt: skip
+    bodies = Bodies(offsets.cpu().numpy(), local.cpu().numpy(), root.cpu().numpy())
     if floor is not None and any(flags):
         lowest = bodies.joints()[..., 1].min(-1)  # (N, T)
         lift = np.maximum(floor - lowest, 0.0) * np.array(flags, dtype=np.float64)[:, None]

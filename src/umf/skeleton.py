@@ -190,8 +190,10 @@ def fit_offsets(joints: Tensor) -> Tensor:
 def inverse_kinematics(joints: Tensor, offsets: Tensor | None = None) -> Tensor:
     """Local rotation matrices (..., 22, 3, 3) from joint positions (..., 22, 3).
 
-    ``offsets`` are the rest offsets the rotations are relative to (default: fitted
-    from ``joints`` themselves). Leaf joints (feet, head, wrists) get the identity.
+    ``offsets`` are the rest offsets the rotations are relative to: (22, 3), or one set per
+    leading index broadcast against ``joints`` (``(N, 1, 22, 3)`` for N people's (N, T, 22,
+    3): everybody in one call, which a GPU needs; default: fitted from ``joints``
+    themselves). Leaf joints (feet, head, wrists) get the identity.
     """
     if offsets is None:
         offsets = fit_offsets(joints)
@@ -213,7 +215,7 @@ def inverse_kinematics(joints: Tensor, offsets: Tensor | None = None) -> Tensor:
         elif len(CHILDREN[j]) == 1:
             c = CHILDREN[j][0]
             target = (parent_glob.transpose(-1, -2) @ vec[..., c, :, None])[..., 0]
-            lrot = quat_to_matrix(quat_between(offsets[c].expand_as(target), target))
+            lrot = quat_to_matrix(quat_between(offsets[..., c, :].expand_as(target), target))
             g = parent_glob @ lrot
         else:  # leaf
             g = parent_glob
