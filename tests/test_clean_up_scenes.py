@@ -6,10 +6,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from conftest import MODULE
 from umf.pipeline import clean_up, clean_up_scenes
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def batch(bandai_clips):
     """Three two-person scenes of real motion, 40 frames, feet sunk 2 cm and planted in
     part, people 0.8 m apart in one scene and 0.1 m (overlapping) in another."""

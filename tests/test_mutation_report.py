@@ -171,7 +171,7 @@ def test_a_sampled_module_is_scored_beside_the_earlier_report():
     assert merged == {f"{noise}1": 0, f"{noise}2": 0, sample[0]: 0} | {n: 1 for n in sample[1:]}
     assert carried == {"umf.flows.noise": {"killed": 18, "timeout": 1}}
     assert extra == {"umf.pipeline": {"sampled": 10, "population": 100}}
-    with pytest.raises(ValueError, match="is not a mutant of the sampled umf.pipeline"):
+    with pytest.raises(ValueError, match=r"is not a mutant of the sampled umf\.pipeline"):
         report.carry_sample({f"{noise}7": 1}, previous, "umf.pipeline", 100)
     lo, hi = report.wilson(9, 10)
     assert 0.59 < lo < 0.6 and 0.98 < hi < 0.99  # Wilson's interval for 9 of 10

@@ -7,13 +7,13 @@ from __future__ import annotations
 import pytest
 import torch
 
-from conftest import FakeText, save_tiny_model, tiny_config
+from conftest import MODULE, FakeText, save_tiny_model, tiny_config
 from umf.coverage import Vocabulary, embed
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline
 
 
-@pytest.fixture(scope="module")
+@pytest.fixture(scope=MODULE)
 def pipe(tmp_path_factory):
     model = save_tiny_model(tmp_path_factory.mktemp("parts") / "model", seed=2)
     return UMFPipeline.from_pretrained(model, text_encoder=FakeText())
@@ -33,7 +33,8 @@ def test_non_finite_latents_are_a_one_line_error(pipe, monkeypatch):
         return torch.full_like(z, float("nan")), n
 
     monkeypatch.setattr(pipe.pflow, "sample", broken)
-    with pytest.raises(UMFError, match=r"^non-finite values \(NaN or inf\) in the sampled latents \(P-Flow"):
+    message = r"^non-finite values \(NaN or inf\) in the sampled latents \(P-Flow"
+    with pytest.raises(UMFError, match=message):
         pipe("a person waves", num_people=2, seconds=1.0, seed=0)
 
 
