@@ -89,6 +89,7 @@ CASES = [
     ([*G, "--seconds", "0.1"], 1, "--seconds must be between 0.5 and 10"),
     ([*G, "--seconds", "60"], 1, "--seconds must be between 0.5 and 10"),
     ([*G, "--seconds", "9"], 1, "--seconds must be between 0.5 and 4.0"),  # the model's limit
+    ([*G, "--device", "tpu"], 1, "--device must be auto, cpu or cuda[:i], got 'tpu'"),
     ([*G, "--seed", "-1"], 1, "--seed must be between 0 and"),
     ([*G, "--seed", str(2**64)], 1, "--seed must be between 0 and"),
     ([*G, "--guidance", "nan"], 1, "--guidance must be a finite number"),
@@ -212,15 +213,17 @@ def test_bad_input(args, code, message, models, tmp_path, monkeypatch, capsys):
     assert _tree(tmp_path) == before  # nothing written, nothing removed
 
 
-def test_no_cuda_is_one_line(tmp_path, monkeypatch, capsys):
+@pytest.mark.parametrize("command", [["eval", "--checkpoint", "m"], ["generate", "x"]])
+def test_no_cuda_is_one_line(tmp_path, monkeypatch, capsys, command):
     monkeypatch.setattr(torch.cuda, "device_count", lambda: 0)
     with pytest.raises(SystemExit) as exit_:
-        run(["eval", "--checkpoint", "m", "--device", "cuda", "--out", str(tmp_path / "r")])
+        run([*command, "--device", "cuda", "--out", str(tmp_path / "r")])
     assert exit_.value.code == 1
     assert (
         capsys.readouterr().err.strip()
         == "umf: error: --device cuda: no CUDA device on this machine"
     )
+    assert not (tmp_path / "r").exists()  # refused before anything is written
 
 
 def test_python_dash_m_umf(tmp_path):
