@@ -196,6 +196,12 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         "REST_DIRECTIONS are int tuples and _bone_axes divides by the norm: the same floats",
     ("umf.exports.gltf.x_scene_to_gltf", '(removed: version="2.0",)'):
         "pygltflib's Asset() defaults to version 2.0",
+    ("umf.representation.x_facing_direction", "up[..., 1] = 2.0"):
+        "up is only crossed with the body's across vector and the result normalised: twice "
+        "as long gives the same unit vector (bar a body without hip or shoulder width)",
+    # pipeline (session 29, a sample)
+    ("umf.pipeline.x_place_people", "if separate and decoded.shape[0] >= 1:"):
+        "one person has nobody to keep apart from: separate_people shifts nobody",
     # kinematics (session 27)
     ("umf.kinematics.x__lm_step",
      "eye = torch.eye(normal.shape[+1], device=normal.device)"):
@@ -377,20 +383,15 @@ def wilson(caught: int, judged: int, z: float = 1.96) -> tuple[float, float]:
 def carry_sample(
     codes: dict[str, int | None], previous: dict, module: str, population: int
 ) -> tuple[dict, dict, dict]:
-    """(codes, carried, sample): a sampled run of ``module`` beside ``previous``, whose
-    other modules it leaves as they were (their killed and timeout counts carried, their
-    survivors kept as survivors); ``sample`` records the sample's size and population."""
+    """(codes, kept, sample): a sampled run of ``module`` beside ``previous``. ``codes``
+    keeps the sample's outcomes alone; ``kept`` is every other module of ``previous`` as
+    that report judged it (its survivors and equivalents were read off the source it ran
+    on, which may have changed since); ``sample`` the sample's size and population."""
     run = {k: v for k, v in codes.items() if v is not None}
     if stray := sorted(k for k in run if module_of(k) != module):
         raise ValueError(f"{stray[0]} was run but is not a mutant of the sampled {module}")
-    merged, carried = dict(run), {}
-    for name, m in previous["modules"].items():
-        if name == module:
-            continue
-        carried[name] = {"killed": m["killed"], "timeout": m["timeout"]}
-        for survivor in [*m["survivors"], *m.get("equivalents", {})]:
-            merged.setdefault(survivor, 0)
-    return merged, carried, {module: {"sampled": len(run), "population": population}}
+    kept = {name: m for name, m in previous["modules"].items() if name != module}
+    return run, kept, {module: {"sampled": len(run), "population": population}}
 
 
 def score(
@@ -556,13 +557,14 @@ def main() -> None:
     codes = read_results(args.mutants)
     if not codes:
         sys.exit(f"error: no mutmut results under {args.mutants} (run `make mutation`)")
-    carried, sample = None, {}
+    carried, kept, sample = None, {}, {}
     if args.sample and previous is None:
         sys.exit("error: --sample needs --previous (the report its other modules come from)")
     try:
         if args.sample:
-            population = len(module_names(args.sample))
-            codes, carried, sample = carry_sample(codes, previous, args.sample, population)
+            # the run's own mutants of the module (the source may have changed since)
+            population = sum(module_of(k) == args.sample for k in codes)
+            codes, kept, sample = carry_sample(codes, previous, args.sample, population)
         elif previous is not None:
             codes, carried = carry_over(codes, previous)
     except ValueError as e:
@@ -573,8 +575,13 @@ def main() -> None:
     diffs = {name: new for name, (_, new) in pairs.items()}
     if previous is not None:  # a survivor not rerun keeps the line the earlier run read
         diffs = {name: new or previous["diffs"].get(name, "") for name, new in diffs.items()}
+    if kept:  # the modules a sample left alone keep their lines and their judgement
+        diffs |= {k: v for k, v in previous["diffs"].items() if module_of(k) in kept}
     originals = {name: old for name, (old, _) in pairs.items()}
     modules = score(codes, diffs, originals=originals, carried=carried)
+    if kept:  # in the earlier report's order
+        order = list(previous["modules"]) + [m for m in modules if m not in previous["modules"]]
+        modules = {name: modules.get(name) or kept[name] for name in order}
     for name, extra in sample.items():
         m = modules.setdefault(name, {"killed": 0, "survived": 0, "timeout": 0, "no tests": 0,
                                       "not run": 0, "equivalent": 0, "survivors": [],

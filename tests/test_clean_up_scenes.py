@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+import torch
 
 from conftest import MODULE
 from umf.pipeline import clean_up, clean_up_scenes
@@ -69,6 +70,9 @@ def test_a_gpu_device_merges_and_per_person_flags_follow_each_scene(batch, monke
     calls.clear()
     clean_up_scenes(decoded, contacts, 0.0, True, fit=False, merge=True)
     assert calls == []  # nothing to fit
+    # a GPU merges by default (the spy fits on the CPU: no GPU needed to see the choice)
+    clean_up_scenes(decoded, contacts, 0.0, True, device=torch.device("cuda"))
+    assert calls == [(6, [True] * 6, torch.device("cuda"))]
 
 
 def test_the_fit_on_a_named_device_is_the_same_fit(batch):

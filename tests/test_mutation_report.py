@@ -167,9 +167,9 @@ def test_a_sampled_module_is_scored_beside_the_earlier_report():
                          "not run": 0, "equivalent": 0, "survivors": []}},
         "diffs": {f"{noise}1": "a = 1", f"{noise}2": "d = 4"}}  # fmt: skip
     codes = {n: None for n in names} | {sample[0]: 0} | {n: 1 for n in sample[1:]}
-    merged, carried, extra = report.carry_sample(codes, previous, "umf.pipeline", 100)
-    assert merged == {f"{noise}1": 0, f"{noise}2": 0, sample[0]: 0} | {n: 1 for n in sample[1:]}
-    assert carried == {"umf.flows.noise": {"killed": 18, "timeout": 1}}
+    run, kept, extra = report.carry_sample(codes, previous, "umf.pipeline", 100)
+    assert run == {sample[0]: 0} | {n: 1 for n in sample[1:]}
+    assert kept == {"umf.flows.noise": previous["modules"]["umf.flows.noise"]}  # as judged
     assert extra == {"umf.pipeline": {"sampled": 10, "population": 100}}
     with pytest.raises(ValueError, match=r"is not a mutant of the sampled umf\.pipeline"):
         report.carry_sample({f"{noise}7": 1}, previous, "umf.pipeline", 100)

@@ -538,9 +538,8 @@ def dry_run_build(config: Any, text_dim: int = 384) -> dict[str, Any]:
     pyramid cannot halve ...) and ones too big to allocate, before anything is allocated.
     """
     try:
-        with torch.device("meta"):
-            norm = Normalizer(torch.zeros(262), torch.ones(262))
-            pipe = UMFPipeline.build(config, norm, _TextDim(text_dim))
+        with torch.device("meta"):  # build's default normaliser: the dry run never reads it
+            pipe = UMFPipeline.build(config, None, _TextDim(text_dim))
     except UMFError:
         raise
     except Exception as exc:  # construction raises many types for bad sizes
