@@ -9,8 +9,8 @@ per batch (1, 64) and people (2, 8), 4 s of motion:
 
 - ``generator_s``: text, P-Flow, S-Flow and the VAE on the GPU (``fit=False,
   separate=False``), synchronised, median of ``--repeats`` after a warm-up;
-- ``pipeline_s`` (the bundled model only): the default call, whose clean-up (anchoring,
-  separation, the rigid-body fit) runs on the CPU;
+- ``pipeline_s`` (the bundled model only): the default call with its clean-up (anchoring
+  and separation on the CPU, the rigid-body fit of the whole chunk on the device);
 - FLOPs of the generator call and its rate against a large fp32 (and TF32) matmul timed in
   the same run;
 - P-Flow with its pyramid against the same network without it (``benchmark.flat_pflow``)

@@ -326,10 +326,12 @@ def read_results(mutants: Path) -> dict[str, int | None]:
 
 def rerun_names(previous: dict) -> list[str]:
     """The mutants a rerun of ``previous`` (a mutation.json) checks again: every survivor,
-    every mutant no test covered and every equivalent (their reasons are judged again)."""
+    every mutant no test covered and every equivalent (their reasons are judged again).
+    A sampled module is left to ``make mutation-sample``."""
     names = []
     for m in previous["modules"].values():
-        names += m["survivors"] + list(m.get("equivalents", {}))
+        if "population" not in m:
+            names += m["survivors"] + list(m.get("equivalents", {}))
     return sorted(names)
 
 
@@ -344,6 +346,8 @@ def carry_over(codes: dict[str, int | None], previous: dict) -> tuple[dict, dict
         raise ValueError(f"{extra[0]} was rerun but is no survivor of the previous report")
     merged, carried = dict(rerun), {}
     for module, m in previous["modules"].items():
+        if "population" in m:  # a sample: main() keeps it as it was
+            continue
         carried[module] = {"killed": m["killed"], "timeout": m["timeout"]}
         for name in [*m["survivors"], *m.get("equivalents", {})]:
             merged.setdefault(name, 0)
@@ -358,6 +362,8 @@ def module_names(module: str, root: Path = Path("src")) -> list[str]:
     import mutmut.__main__ as mm
 
     path = root.joinpath(*module.split(".")).with_suffix(".py")
+    if not path.is_file():
+        sys.exit(f"error: no module {module} ({path} not found)")
     made = mm.write_all_mutants_to_file(out=io.StringIO(), source=path.read_text(),
                                         filename=path)  # fmt: skip
     return sorted(mm.get_mutant_name(path, n) for n in made.mutant_names)
@@ -388,6 +394,8 @@ def carry_sample(
     that report judged it (its survivors and equivalents were read off the source it ran
     on, which may have changed since); ``sample`` the sample's size and population."""
     run = {k: v for k, v in codes.items() if v is not None}
+    if not run:
+        raise ValueError(f"no mutant of {module} ran (an interrupted run?)")
     if stray := sorted(k for k in run if module_of(k) != module):
         raise ValueError(f"{stray[0]} was run but is not a mutant of the sampled {module}")
     kept = {name: m for name, m in previous["modules"].items() if name != module}
@@ -579,9 +587,15 @@ def main() -> None:
         diffs |= {k: v for k, v in previous["diffs"].items() if module_of(k) in kept}
     originals = {name: old for name, (old, _) in pairs.items()}
     modules = score(codes, diffs, originals=originals, carried=carried)
+    if previous is not None and not args.sample:  # a sample in the earlier report stays
+        for name, m in previous["modules"].items():
+            if "population" in m:
+                modules[name] = m
+                diffs |= {k: v for k, v in previous["diffs"].items() if module_of(k) == name}
     if kept:  # in the earlier report's order
         order = list(previous["modules"]) + [m for m in modules if m not in previous["modules"]]
-        modules = {name: modules.get(name) or kept[name] for name in order}
+        modules = {name: modules.get(name) or kept.get(name) or previous["modules"][name]
+                   for name in order}  # fmt: skip
     for name, extra in sample.items():
         m = modules.setdefault(name, {"killed": 0, "survived": 0, "timeout": 0, "no tests": 0,
                                       "not run": 0, "equivalent": 0, "survivors": [],

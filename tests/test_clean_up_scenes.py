@@ -27,14 +27,15 @@ def batch(bandai_clips):
         pair[..., 1] -= pair[..., 1].min() + 0.02
         scenes.append(pair)
         c = np.zeros((2, 40, 4))
-        c[:, 5:30, :2] = 1.0
+        c[0, 5 + 3 * k : 30, :2] = 1.0  # every person of every scene planted differently,
+        c[1, 12 : 36 - 4 * k, 2:] = 1.0  # so a fit that mixed them up would show
         contacts.append(c)
     return np.stack(scenes), np.stack(contacts)
 
 
-def test_merged_fit_matches_scene_by_scene(batch):
+@pytest.mark.parametrize("clean", [[True, True], [False, True]])  # an actor, as in react
+def test_merged_fit_matches_scene_by_scene(batch, clean):
     decoded, contacts = batch
-    clean = [True, True]
     one_by_one = clean_up_scenes(decoded, contacts, 0.0, clean, merge=False)
     merged = clean_up_scenes(decoded, contacts, 0.0, clean, merge=True, device="cpu")
     np.testing.assert_array_equal(one_by_one[0], merged[0])
@@ -43,6 +44,10 @@ def test_merged_fit_matches_scene_by_scene(batch):
         assert a.num_people == b.num_people == 2
         np.testing.assert_allclose(a.joints(), b.joints(), atol=1e-7)
         np.testing.assert_allclose(a.offsets, b.offsets, atol=1e-12)
+    # the contacts reach their own person: another person's would pin other frames
+    swapped = clean_up_scenes(decoded, contacts[:, ::-1].copy(), 0.0, [True, True], merge=True)
+    assert max(np.abs(a.joints() - b.joints()).max()
+               for a, b in zip(swapped[1], merged[1], strict=True)) > 1e-4  # fmt: skip
     # scene by scene is clean_up itself, scene after scene
     shifts, bodies = clean_up(decoded[2], contacts[2], 0.0, clean)
     np.testing.assert_array_equal(shifts, one_by_one[0][2])
@@ -73,12 +78,3 @@ def test_a_gpu_device_merges_and_per_person_flags_follow_each_scene(batch, monke
     # a GPU merges by default (the spy fits on the CPU: no GPU needed to see the choice)
     clean_up_scenes(decoded, contacts, 0.0, True, device=torch.device("cuda"))
     assert calls == [(6, [True] * 6, torch.device("cuda"))]
-
-
-def test_the_fit_on_a_named_device_is_the_same_fit(batch):
-    from umf.kinematics import fit_bodies
-
-    decoded, contacts = batch
-    a = fit_bodies(decoded[0], contacts[0], 0.0, True)
-    b = fit_bodies(decoded[0], contacts[0], 0.0, True, device="cpu")
-    np.testing.assert_array_equal(a.joints(), b.joints())

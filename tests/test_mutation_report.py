@@ -173,6 +173,14 @@ def test_a_sampled_module_is_scored_beside_the_earlier_report():
     assert extra == {"umf.pipeline": {"sampled": 10, "population": 100}}
     with pytest.raises(ValueError, match=r"is not a mutant of the sampled umf\.pipeline"):
         report.carry_sample({f"{noise}7": 1}, previous, "umf.pipeline", 100)
+    with pytest.raises(ValueError, match=r"no mutant of umf\.pipeline ran"):
+        report.carry_sample({n: None for n in names}, previous, "umf.pipeline", 100)
+    # a later rerun of the survivors leaves a sampled module to its own target
+    sampled = dict(previous, modules=dict(previous["modules"], **{"umf.pipeline": {
+        "killed": 9, "survived": 1, "timeout": 0, "no tests": 0, "not run": 90,
+        "equivalent": 0, "survivors": [sample[0]], "sampled": 10, "population": 100}}))  # fmt: skip
+    assert sample[0] not in report.rerun_names(sampled)
+    assert "umf.pipeline" not in report.carry_over({}, sampled)[1]
     lo, hi = report.wilson(9, 10)
     assert 0.59 < lo < 0.6 and 0.98 < hi < 0.99  # Wilson's interval for 9 of 10
     assert report.wilson(10, 10)[1] == 1.0 and report.wilson(0, 0) == (0.0, 1.0)

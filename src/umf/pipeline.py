@@ -231,8 +231,9 @@ class UMFPipeline:
         themselves are untouched and the shifts are in ``scene.meta["shifts"]``.
         Evaluation turns it off to score the raw model.
 
-        ``fit`` (default) makes each person one rigid body (:mod:`umf.kinematics`, once per
-        scene): ``scene.joints`` is its forward kinematics, what every export writes, with
+        ``fit`` (default) makes each person one rigid body (:mod:`umf.kinematics`; scene by
+        scene on a CPU, every scene sampled together at once on a GPU: :func:`clean_up_scenes`):
+        ``scene.joints`` is its forward kinematics, what every export writes, with
         planted feet pinned and everyone kept off the floor (the actor of a reaction is
         only fitted). ``anchor`` (default; only with ``fit``) first moves each generated
         person back along the floor by the slide of a planted foot (:mod:`umf.anchoring`):
