@@ -37,9 +37,11 @@ def lateral(joints: np.ndarray) -> float:
     return float(lateral_offset(joints, 0, 1, 0)[0])
 
 
-def passes(left_m: float, side: str) -> bool:
-    """The relation checks' rule: more than 0.2 m to the named side."""
-    return left_m > 0.2 if side == "left" else left_m < -0.2
+def passes(joints: np.ndarray, side: str) -> bool:
+    """The pair checks' own "side" test of person 2 against person 1 (first frame)."""
+    from umf.data.relations import check
+
+    return check(joints, {"type": "side", "a": 0, "b": 1, "side": side}).passed
 
 
 def measure(model: Path | None, seeds: int) -> dict:
@@ -55,16 +57,17 @@ def measure(model: Path | None, seeds: int) -> dict:
                        fit=False, separate=False)  # fmt: skip
             delivered = pipe([prompt] * seeds, num_people=2, seed=0, sample_indices=range(seeds))
             for name, scenes in (("raw", raw), ("delivered", delivered)):
-                left = [lateral(s.joints) for s in scenes]
-                row[f"{side} {name}"] = {"left_m": [round(x, 3) for x in left],
-                                         "passed": sum(passes(x, side) for x in left)}  # fmt: skip
+                joints = [s.joints for s in scenes]
+                row[f"{side} {name}"] = {
+                    "left_m": [round(lateral(j), 3) for j in joints],
+                    "passed": sum(passes(j, side) for j in joints),
+                }
         out["named"][kind] = row
     raw = pipe([UNNAMED] * seeds, num_people=2, seed=0, sample_indices=range(seeds), fit=False,
                separate=False)  # fmt: skip
-    left = [lateral(s.joints) for s in raw]
-    out["unnamed"] = {"prompt": UNNAMED, "left_m": [round(x, 3) for x in left],
-                      "left": sum(x > 0.2 for x in left),
-                      "right": sum(x < -0.2 for x in left)}  # fmt: skip
+    out["unnamed"] = {"prompt": UNNAMED, "left_m": [round(lateral(s.joints), 3) for s in raw],
+                      "left": sum(passes(s.joints, "left") for s in raw),
+                      "right": sum(passes(s.joints, "right") for s in raw)}  # fmt: skip
     return out
 
 

@@ -116,6 +116,18 @@ def family_rows(pipe, family: str, timed, repeats: int, batches, peoples, full_b
     return rows
 
 
+def decoded_batch(pipe, batch: int):
+    """Raw decoded joints (B, 2, T, 22, 3) and contact labels (B, 2, T, 4) of ``batch``
+    generated two-person scenes: the clean-up's input."""
+    import numpy as np
+
+    from umf.representation import CONTACT
+
+    scenes = pipe([PROMPT] * batch, num_people=2, seconds=4.0, fit=False, separate=False)
+    return (np.stack([s.joints for s in scenes]),
+            np.stack([s.features[..., CONTACT] for s in scenes]))  # fmt: skip
+
+
 def fit_agreement(pipe, timed, batch: int) -> dict:
     """The clean-up of ``batch`` generated two-person scenes both ways: every person of
     every scene fitted in one solve on ``pipe``'s device, and scene by scene on the CPU
@@ -123,11 +135,8 @@ def fit_agreement(pipe, timed, batch: int) -> dict:
     import numpy as np
 
     from umf.pipeline import clean_up_scenes
-    from umf.representation import CONTACT
 
-    scenes = pipe([PROMPT] * batch, num_people=2, seconds=4.0, fit=False, separate=False)
-    decoded = np.stack([s.joints for s in scenes])
-    contacts = np.stack([s.features[..., CONTACT] for s in scenes])
+    decoded, contacts = decoded_batch(pipe, batch)
     merged = functools.partial(clean_up_scenes, decoded, contacts, device=pipe.device, merge=True)
     apart = functools.partial(clean_up_scenes, decoded, contacts, merge=False)
     one, two = merged(), apart()
@@ -149,14 +158,9 @@ def profile_clean_up(pipe, batch: int, top: int = 25) -> None:
     import cProfile
     import pstats
 
-    import numpy as np
-
     from umf.pipeline import clean_up_scenes
-    from umf.representation import CONTACT
 
-    scenes = pipe([PROMPT] * batch, num_people=2, seconds=4.0, fit=False, separate=False)
-    decoded = np.stack([s.joints for s in scenes])
-    contacts = np.stack([s.features[..., CONTACT] for s in scenes])
+    decoded, contacts = decoded_batch(pipe, batch)
     clean_up_scenes(decoded, contacts, device=pipe.device, merge=True)  # warm-up
     prof = cProfile.Profile()
     prof.enable()

@@ -48,7 +48,7 @@ def test_merged_fit_matches_scene_by_scene(batch, clean):
     swapped = clean_up_scenes(decoded, contacts[:, ::-1].copy(), 0.0, [True, True], merge=True)
     assert max(np.abs(a.joints() - b.joints()).max()
                for a, b in zip(swapped[1], merged[1], strict=True)) > 1e-4  # fmt: skip
-    # scene by scene is clean_up itself, scene after scene
+    # one scene is a batch of one
     shifts, bodies = clean_up(decoded[2], contacts[2], 0.0, clean)
     np.testing.assert_array_equal(shifts, one_by_one[0][2])
     np.testing.assert_array_equal(bodies.joints(), one_by_one[1][2].joints())

@@ -443,11 +443,9 @@ def clean_up(
 
     Returns the (N, 3) separation shifts and the bodies (None without ``fit``).
     """
-    start, shifts = place_people(decoded, contacts, floor, clean, anchor and fit, separate,
-                                 contact)  # fmt: skip
-    if not fit:
-        return shifts, None
-    return shifts, fit_bodies(start + shifts[:, None, None, :], contacts, floor, clean)
+    shifts, bodies = clean_up_scenes(decoded[None], contacts[None], floor, clean, anchor,
+                                     separate, fit, [contact])  # fmt: skip
+    return shifts[0], bodies[0]
 
 
 def place_people(
@@ -483,29 +481,27 @@ def clean_up_scenes(
     """:func:`clean_up` for B scenes (B, N, T, 22, 3), contacts (B, N, T, 4), ``contact``
     one entry per scene: the (B, N, 3) shifts and each scene's bodies.
 
-    ``merge`` (default: on a GPU ``device``) fits every person of every scene in one solve
-    on ``device``, thousands of poses at once; otherwise scene by scene, which is faster on
-    a CPU (merging 16 scenes took 1.4-1.5x the time here: the bigger systems leave the
-    cache). Each person's fit is its own either way (bone lengths, pins, floor are per
-    person), so the two agree to rounding.
+    Anchoring and separation run scene by scene. ``merge`` (default: on a GPU ``device``)
+    fits every person of every scene in one solve on ``device``, thousands of poses at
+    once; otherwise the fit too runs scene by scene, which is faster on a CPU (merging 16
+    scenes took 1.4-1.6x the time here: the bigger systems leave the cache). Each person's
+    fit is its own either way (bone lengths, pins, floor are per person).
     """
     b, n = decoded.shape[:2]
     near = [None] * b if contact is None else list(contact)
     shifts = np.zeros((b, n, 3), dtype=np.float32)
-    if merge is None:
-        merge = device is not None and torch.device(device).type == "cuda"
-    if not (fit and merge):
-        fitted = []
-        for i in range(b):
-            shifts[i], bodies = clean_up(decoded[i], contacts[i], floor, clean, anchor,
-                                         separate, fit, near[i])  # fmt: skip
-            fitted.append(bodies)
-        return shifts, fitted
     placed = []
     for i in range(b):
-        start, shifts[i] = place_people(decoded[i], contacts[i], floor, clean, anchor, separate,
-                                        near[i])  # fmt: skip
+        start, shifts[i] = place_people(decoded[i], contacts[i], floor, clean, anchor and fit,
+                                        separate, near[i])  # fmt: skip
         placed.append(start + shifts[i][:, None, None, :])
+    if not fit:
+        return shifts, [None] * b
+    if merge is None:
+        merge = device is not None and torch.device(device).type == "cuda"
+    if not merge:
+        return shifts, [fit_bodies(p, c, floor, clean) for p, c in zip(placed, contacts,
+                                                                        strict=True)]  # fmt: skip
     flags = [bool(clean)] * n if isinstance(clean, bool) else [bool(c) for c in clean]
     every = fit_bodies(np.concatenate(placed), contacts.reshape(b * n, *contacts.shape[2:]),
                        floor, flags * b, device=device)  # fmt: skip
