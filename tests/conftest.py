@@ -164,15 +164,24 @@ def tiny_config():
     return cfg
 
 
-def save_tiny_model(out: Path, seed: int = 0) -> Path:
-    """An untrained tiny UMF model directory (what `umf train export` writes), in a second."""
+def save_tiny_model(out: Path, seed: int = 0, person_prompts: bool = False) -> Path:
+    """An untrained tiny UMF model directory (what `umf train export` writes), in a second.
+
+    ``person_prompts``: both flows take per-person prompts, through a random (not zero)
+    projection, so an own prompt changes what they make."""
     from umf.checkpoint import save_checkpoint
+    from umf.config import set_option
     from umf.pipeline import UMFPipeline
     from umf.representation import Normalizer
 
     torch.manual_seed(seed)
     cfg = tiny_config()
+    if person_prompts:
+        for o in ("pflow.denoiser.person_text=true", "sflow.denoiser.person_text=true"):
+            cfg = set_option(cfg, o)
     pipe = UMFPipeline.build(cfg, text_encoder=FakeText())
+    for flow in (pipe.pflow, pipe.sflow) if person_prompts else ():
+        torch.nn.init.normal_(flow.net.person_proj.weight, std=0.5)
     norm = Normalizer(torch.zeros(262), torch.full((262,), 0.1))
     modules = {"vae": pipe.vae, "pflow": pipe.pflow, "sflow": pipe.sflow}
     return save_checkpoint(out, modules, config=cfg.to_dict(), normalizer=norm)

@@ -218,7 +218,7 @@ def test_generators_are_made_on_the_model_device(device, monkeypatch):
         g = stage.generator.on(torch.device(device))
         assert g is None if device == "meta" else g.device.type == device
     batch = _latent_batch(pipe, device)
-    _, prev_mask, w, _ = _stages(pipe)[1]._inputs(batch)  # random reacting person
+    _, prev_mask, w, _, _ = _stages(pipe)[1]._inputs(batch)  # random reacting person
     assert prev_mask.device.type == w.device.type == device
 
 

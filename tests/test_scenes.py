@@ -214,3 +214,35 @@ def test_side_by_side_captions_name_the_side_the_check_asks_for(actors):
         assert len(r["captions"]) - len(named) == 2  # and two wordings leave it open
         sides.add(side)
     assert sides == {"left", "right"}  # both sides occur, each named as itself
+
+
+def test_stand_facing_pairs_two_different_actions_the_captions_leave_open(actors):
+    """The per-person prompts' training scenes: two people face each other doing
+    different in-place actions, each action as likely as any other, and no scene caption
+    names an action (only each person's own captions do)."""
+    from umf.data.scene_relations import IN_PLACE, RELATIONS
+
+    rel = RELATIONS["stand_facing"]
+    pools: dict[str, list] = {}
+    for a in actors:
+        pools.setdefault(a.content, []).append(a)
+    kinds = {c for c in IN_PLACE if pools.get(c)}
+    assert len(kinds) >= 2, "the fixture has in-place actions"
+    rng = np.random.default_rng(0)
+    seen = []
+    for _ in range(200):
+        pair = C._pick_actors(rng, rel, 2, pools)
+        assert pair is not None and pair[0].content != pair[1].content
+        assert {p.content for p in pair} <= kinds
+        seen += [p.content for p in pair]
+    counts = np.array([seen.count(k) for k in sorted(kinds)])
+    assert counts.min() > 0.4 * counts.mean()  # uniform over actions, not over clips
+    by_id = {x.id: x for x in actors}
+    out = C.compose_scene(np.random.default_rng(1), rel, 2, pools, by_id)
+    assert out is not None
+    recipe, joints = out
+    assert all(r.passed for r in check_record(joints, recipe))
+    assert facing_angle(joints, 0, 1) < 45 and facing_angle(joints, 1, 0) < 45
+    actions = ("wave", "bow", "raise", "hand", "kick", "punch", "slash", "call")
+    for caption in recipe["captions"]:
+        assert not any(w in caption.lower() for w in actions), caption

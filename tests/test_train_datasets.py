@@ -726,3 +726,54 @@ def test_caption_mix_reaches_the_training_split_only(corpus):
     single = [dl.dataset for dl in train.loaders if isinstance(dl.dataset, D.SingleMotionDataset)]
     assert [ds.caption_mix for ds in single] == [0.5]
     assert all(getattr(dl.dataset, "caption_mix", 0.0) == 0.0 for dl in val.loaders)
+
+
+# --------------------------------------------------------------------- per-person prompts
+def test_scene_items_carry_each_persons_own_caption_of_their_clip(corpus):
+    """The own captions are wordings of the clip each person plays, side words swapped
+    when the item (or the person in the recipe) is mirrored, and their draw leaves every
+    other draw of the item as it was."""
+    ds = D.SceneDataset(corpus, "train", None, 20, 80, mirror=True, seed=4)
+    captions = {c.id: c.captions for c in corpus.clips}
+    flips = set()
+    for i in range(len(ds)):
+        it = ds[i]
+        recipe = corpus.scenes["train"][i]
+        assert len(it["person_captions"]) == it["num_people"]
+        for p, own in zip(recipe["people"], it["person_captions"], strict=True):
+            mirrored = it["mirrored"] != bool(p.get("mirrored"))
+            flips.add(mirrored)
+            assert (D.mirror_caption(own) if mirrored else own) in captions[p["clip"]]
+    assert flips == {True, False}  # both kinds were checked
+    # the own captions draw from a stream of their own: without them, the same item
+    before = ds[0]
+    ds._own_captions = lambda *a: ["", ""]
+    after = ds[0]
+    assert torch.equal(before["features"], after["features"])
+    assert before["caption"] == after["caption"] and before["start"] == after["start"]
+
+
+def test_single_items_repeat_their_action_in_half_their_own_captions(corpus):
+    ds = D.SingleMotionDataset(corpus, "train", None, 20, 80, mirror=True, seed=3)
+    owns = []
+    for epoch in range(30):
+        ds.set_epoch(epoch)
+        for i in range(len(ds)):
+            it, clip = ds[i], ds.items[i][0]
+            (own,) = it["person_captions"]
+            owns.append(own)
+            if own:
+                assert (D.mirror_caption(own) if it["mirrored"] else own) in clip.captions
+    share = sum(bool(o) for o in owns) / len(owns)
+    assert abs(share - D.OWN_SINGLE) < 0.1, share
+    ds.set_epoch(0)
+    batch = ds.collate([ds[0], ds[1]])
+    assert batch["person_captions"] == [ds[0]["person_captions"], ds[1]["person_captions"]]
+
+
+def test_own_caption_present_share_and_empty_clips():
+    rng = np.random.default_rng(0)
+    assert D.own_caption([], rng) == ""
+    draws = [D.own_caption(["a", "b"], rng, present=0.25) for _ in range(2000)]
+    assert abs(draws.count("") / 2000 - 0.75) < 0.04
+    assert {"a", "b"} <= set(draws)

@@ -342,11 +342,17 @@ def read_weights(path: str | os.PathLike, name: str) -> dict[str, torch.Tensor]:
 
 
 def checked_weights(
-    path: Path, name: str, module: nn.Module, *, strict: bool = True, may_lack: str = ""
+    path: Path,
+    name: str,
+    module: nn.Module,
+    *,
+    strict: bool = True,
+    may_lack: str | tuple[str, ...] = "",
 ) -> dict[str, torch.Tensor]:
     """``<name>.safetensors`` checked against ``module``'s keys and shapes, ready to load.
 
-    Keys ending in ``may_lack`` (when given) may be missing even when ``strict``.
+    Keys ending in ``may_lack`` (a suffix or several, when given) may be missing even when
+    ``strict``.
     """
     sd = read_weights(path, name)
     own = module.state_dict()

@@ -106,6 +106,10 @@ class DenoiserConfig:
     text_ff_dim: int = 2048
     text_layers: int = 2
     branch_layers: int = 2  # per-dataset output branches (P-Flow only)
+    # a prompt of the person's own beside the scene's: its text token, through the same
+    # text head and a zero-initialised projection, is added to the scene's (a model
+    # fine-tuned with it starts as the model it came from)
+    person_text: bool = False
 
 
 @dataclass
@@ -133,6 +137,8 @@ class PFlowConfig:
     # last stage adds (a wave's swing); the coarse stages fix what the motion is
     fine_guidance: float | None = None
     p_uncond: float = 0.1
+    # chance a training item's own prompt is dropped (with the scene's, always, at p_uncond)
+    p_person_drop: float = 0.3
     # loss scale of the single-person corpus (the authors': 0.1 for HumanML3D's size); the
     # small family uses 1: on Bandai the actions and gestures are in the single clips
     single_person_weight: float = 0.1
@@ -158,6 +164,7 @@ class SFlowConfig:
     solver: str = "euler"
     guidance: float = 3.0
     p_uncond: float = 0.1
+    p_person_drop: float = 0.3  # as PFlowConfig.p_person_drop
     lambda_recon: float = 1.0  # 0 = no reconstruction loss (ablation)
     reaction_only: bool = False  # noise-free reaction path (ablation)
     context_noise: float = 0.0  # perturb real context latents to look generated

@@ -181,6 +181,30 @@ class UMFPipeline:
                           strict=True))  # fmt: skip
         return [scored[p] for p in prompts]
 
+    @property
+    def person_prompts(self) -> bool:
+        """Whether the model takes a prompt per person (both flows trained with them)."""
+        return all(m.net.person_proj is not None for m in (self.pflow, self.sflow))
+
+    def check_person_prompts(self, own: Sequence[str | None], acting: bool = False) -> None:
+        """A one-line error when per-person prompts are asked of a model without them, or
+        for person 1 of a reaction (that person is the user's motion)."""
+        if not any(p is not None for p in own):
+            return
+        if not self.person_prompts:
+            raise UMFError(f"the model {self.name} was not trained with per-person prompts: "
+                           "describe everyone in the scene prompt")  # fmt: skip
+        if acting and own[0] is not None:
+            raise UMFError("person 1 is the given motion: person prompts start with person 2")
+
+    def _person_text(self, req: Request, k: int, batch: int) -> dict[str, Any]:
+        """Person ``k``'s (0-based) own prompt for a flow's sampler, or nothing."""
+        own = req.person_prompts[k] if k < len(req.person_prompts) else None
+        if own is None:
+            return {}
+        words = respell_prompt(own, self.config.text.respell)
+        return {"person_text": self.text_encoder.encode([words] * batch).to(self.device)}
+
     def to(self, device: str | torch.device) -> UMFPipeline:
         self.device = torch.device(device)
         for m in (self.vae, self.pflow, self.sflow):
@@ -209,8 +233,15 @@ class UMFPipeline:
         sample_indices: Sequence[int] | None = None,
         fit: bool = True,
         anchor: bool = True,
+        person_prompts: Sequence[str | None] | None = None,
     ) -> list[Scene]:
         """Generate one scene per prompt (batched).
+
+        ``person_prompts``: what each person does, beside the scene prompt, the K-th for
+        person K (None, or a shorter list: that person follows the scene prompt alone), the
+        same for every scene of the call; for a model trained with them
+        (``denoiser.person_text``). Recorded in ``scene.meta["person_prompts"]`` with their
+        coverage in ``scene.meta["person_coverage"]``.
 
         Scene ``i`` is a function of (model, prompt, people, seconds, seed, sample index)
         alone: its noise comes from its own generator (:mod:`umf.streams`), whatever else
@@ -246,13 +277,22 @@ class UMFPipeline:
         copy when written.
         """
         req = check_request(prompts, num_people, seconds, seed, guidance, pflow_steps,
-                            sflow_steps, sample_indices)  # fmt: skip
+                            sflow_steps, sample_indices, person_prompts)  # fmt: skip
         frames = check_for_model(req, self.config, acting=actor is not None)
+        self.check_person_prompts(req.person_prompts, acting=actor is not None)
         if actor is not None:
             actor = check_actor(actor, self.config.fps, self.config.vae.max_frames)
             frames = actor.shape[0] - 1
         seed = fresh_seed() if req.seed is None else req.seed
         covered = dict(zip(req.prompts, self.coverage(req.prompts), strict=True))
+        own = list(req.person_prompts) + [None] * (req.num_people - len(req.person_prompts))
+        own_meta: dict[str, Any] = {}
+        if any(p is not None for p in own):
+            scored = self.coverage([p for p in own if p is not None])
+            own_meta = {
+                "person_prompts": own,
+                "person_coverage": [None if p is None else scored.pop(0) for p in own],
+            }
         scenes: list[Scene] = []
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
@@ -262,6 +302,7 @@ class UMFPipeline:
                                       near):  # fmt: skip
                 if covered[scene.text] is not None:
                     scene.meta["coverage"] = covered[scene.text]
+                scene.meta.update(own_meta)
                 scenes.append(scene)
         return scenes
 
@@ -303,6 +344,7 @@ class UMFPipeline:
                 steps=req.pflow_steps or self.config.pflow.steps,
                 guidance=FROM_CONFIG if guidance is None else guidance,  # per stage
                 generator=gen,
+                **self._person_text(req, 0, b),
             )
             latents, nfe = [z1], nfe + n
         reencode = self.config.sflow.reencode_context and num_people > 1
@@ -324,6 +366,7 @@ class UMFPipeline:
                 steps=req.sflow_steps or self.config.sflow.steps_for(num_people),
                 guidance=self.config.sflow.guidance if guidance is None else guidance,
                 generator=gen,
+                **self._person_text(req, k, b),
             )
             latents.append(w)
             nfe += n
@@ -376,13 +419,15 @@ class UMFPipeline:
         sflow_steps: int | None = None,
         anchor: bool = True,
         separate: bool = True,
+        person_prompt: str | None = None,
     ) -> Scene:
         """A new Scene: person ``person`` (1-based, as in the files' ``-p1``, ``-p2`` ...)
         sampled again from ``seed`` as S-Flow's reaction to everybody else, whose joints,
         bodies and features are copied bit for bit (:mod:`umf.reroll`; person 1 too is
-        re-rolled as a reaction to the others). ``prompt``: the scene's own by default."""
+        re-rolled as a reaction to the others). ``prompt``: the scene's own by default;
+        ``person_prompt``: what this person does (default: what the scene recorded)."""
         return reroll_person(self, scene, person, seed, prompt, guidance, sflow_steps, anchor,
-                             separate)  # fmt: skip
+                             separate, person_prompt)  # fmt: skip
 
     def decode(self, z: torch.Tensor, num_frames: int, reaction: bool = False) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262). ``reaction``: people

@@ -32,7 +32,7 @@ from umf.scene import Scene
 from umf.separation import separate_people, touching_distances
 from umf.streams import scene_generators
 from umf.text import respell_prompt
-from umf.validation import check_int, check_request
+from umf.validation import check_int, check_request, check_text
 
 
 def check_reroll(scene: Scene, person: int, fps: float, max_frames: int) -> None:
@@ -63,9 +63,11 @@ def reroll_person(
     sflow_steps: int | None = None,
     anchor: bool = True,
     separate: bool = True,
+    person_prompt: str | None = None,
 ) -> Scene:
     """``scene`` with person ``person`` (1-based) sampled again by ``pipe``'s S-Flow from
-    ``seed``; see the module docstring. ``prompt`` defaults to the scene's own text."""
+    ``seed``; see the module docstring. ``prompt`` defaults to the scene's own text,
+    ``person_prompt`` (what this person does) to the one the scene recorded for them."""
     cfg = pipe.config
     check_reroll(scene, person, cfg.fps, cfg.vae.max_frames)
     if prompt is not None and not isinstance(prompt, str):
@@ -80,6 +82,13 @@ def reroll_person(
                         sflow_steps=sflow_steps)  # fmt: skip
     text, seed, guidance = req.prompts[0], req.seed, req.guidance
     n, k = scene.num_people, person - 1
+    own_all = list(scene.meta.get("person_prompts") or [None] * n)
+    own_all += [None] * (n - len(own_all))
+    if person_prompt is not None:
+        own_all[k] = check_text(person_prompt, "person prompt")
+    own = own_all[k] if isinstance(own_all[k], str) else None
+    if own is not None:
+        pipe.check_person_prompts([own])
     steps = req.sflow_steps or cfg.sflow.steps_for(n)
     others = [i for i in range(n) if i != k]
     joints = torch.from_numpy(np.ascontiguousarray(scene.joints, dtype=np.float32))
@@ -94,9 +103,14 @@ def reroll_person(
         words = respell_prompt(text, cfg.text.respell)
         cond = pipe.text_encoder.encode([words]).to(device)
         uncond = pipe.text_encoder.encode([""]).to(device)
+        person_kw = {}
+        if own is not None:
+            own_words = respell_prompt(own, cfg.text.respell)
+            person_kw["person_text"] = pipe.text_encoder.encode([own_words]).to(device)
         w, _ = pipe.sflow.sample(context, mask, cond, uncond, steps=steps,
                                  guidance=cfg.sflow.guidance if guidance is None else guidance,
-                                 generator=scene_generators(seed, [0], device))  # fmt: skip
+                                 generator=scene_generators(seed, [0], device),
+                                 **person_kw)  # fmt: skip
         new = transform_features(pipe.decode(w, t, reaction=True)[0].cpu(), frame, inverse=True)
     decoded = features_to_joints_integrated(new).numpy()  # (T, 22, 3), one frame added
     contacts = new[:, CONTACT].numpy()
@@ -129,8 +143,13 @@ def reroll_person(
         bodies = Bodies(b.offsets.copy(), b.rotations.copy(), b.root.copy())
         bodies.offsets[k], bodies.rotations[k], bodies.root[k] = (
             body.offsets[0], body.rotations[0], body.root[0])  # fmt: skip
-    rerolls = [*scene.meta.get("rerolled", []), {"person": person, "seed": seed, "prompt": text}]
+    entry = {"person": person, "seed": seed, "prompt": text}
+    if own is not None:
+        entry["person_prompt"] = own
+    rerolls = [*scene.meta.get("rerolled", []), entry]
     meta = {**scene.meta, "rerolled": rerolls}
+    if any(isinstance(p, str) for p in own_all):
+        meta["person_prompts"] = own_all
     if "shifts" in meta and len(meta["shifts"]) == n:
         meta["shifts"] = [list(s) for s in meta["shifts"]]
         meta["shifts"][k] = shift.tolist()

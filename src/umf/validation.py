@@ -46,6 +46,7 @@ class Request:
     pflow_steps: tuple[int, ...] | None
     sflow_steps: int | None
     sample_indices: tuple[int, ...]
+    person_prompts: tuple[str | None, ...] = ()  # the K-th for person K (None: scene only)
 
 
 # --------------------------------------------------------------------- scalars
@@ -80,20 +81,36 @@ def check_prompts(prompts: Any) -> tuple[str, ...]:
         raise UMFError("the prompt is empty")
     if len(prompts) > MAX_SCENES:
         raise UMFError(f"at most {MAX_SCENES} prompts per call, got {len(prompts)}")
-    for p in prompts:
-        if not isinstance(p, str):
-            raise UMFError(f"every prompt must be a string, got {p!r:.60}")
-        if not p.strip():
-            raise UMFError("the prompt is empty")
-        if len(p) > MAX_PROMPT_CHARS:
-            raise UMFError(f"a prompt may have at most {MAX_PROMPT_CHARS} characters, got {len(p)}")
-        try:
-            p.encode("utf-8")
-        except UnicodeEncodeError:  # a lone surrogate ("\ud800"): no tokenizer takes it
-            raise UMFError(
-                f"the prompt is not valid text (unpaired surrogate in {p!r:.60})"
-            ) from None
-    return tuple(prompts)
+    return tuple(check_text(p) for p in prompts)
+
+
+def check_text(p: Any, what: str = "prompt") -> str:
+    """A non-empty string of at most MAX_PROMPT_CHARS characters a tokenizer can take."""
+    if not isinstance(p, str):
+        raise UMFError(f"every {what} must be a string, got {p!r:.60}")
+    if not p.strip():
+        raise UMFError(f"the {what} is empty")
+    if len(p) > MAX_PROMPT_CHARS:
+        raise UMFError(f"a {what} may have at most {MAX_PROMPT_CHARS} characters, got {len(p)}")
+    try:
+        p.encode("utf-8")
+    except UnicodeEncodeError:  # a lone surrogate ("\ud800"): no tokenizer takes it
+        raise UMFError(f"the {what} is not valid text (unpaired surrogate in {p!r:.60})") from None
+    return p
+
+
+def check_person_prompts(person_prompts: Any, num_people: int) -> tuple[str | None, ...]:
+    """Per-person prompts: a list, the K-th for person K, None (or absent) for a person who
+    follows the scene prompt alone; never more prompts than people."""
+    if person_prompts is None:
+        return ()
+    if isinstance(person_prompts, str | bytes) or not isinstance(person_prompts, Sequence):
+        raise UMFError("person prompts must be a list (the K-th for person K), got "
+                       f"{person_prompts!r:.60}")  # fmt: skip
+    if len(person_prompts) > num_people:
+        raise UMFError(f"{len(person_prompts)} person prompts for {num_people} "
+                       f"{'person' if num_people == 1 else 'people'}")  # fmt: skip
+    return tuple(None if p is None else check_text(p, "person prompt") for p in person_prompts)
 
 
 def check_steps(steps: Any) -> tuple[int, ...] | None:
@@ -129,6 +146,7 @@ def check_request(
     pflow_steps: Any = None,
     sflow_steps: Any = None,
     sample_indices: Any = None,
+    person_prompts: Any = None,
 ) -> Request:
     """Every model-independent bound of a generation request, checked in one place."""
     texts = check_prompts(prompts)
@@ -148,7 +166,8 @@ def check_request(
             raise UMFError(f"{len(sample_indices)} sample indices for {len(texts)} prompts")
         indices = tuple(check_int("a sample index", i, 0, 2**31 - 1) for i in sample_indices)
     steps = check_steps(pflow_steps)
-    return Request(texts, people, secs, seed, guidance, steps, sflow_steps, indices)
+    own = check_person_prompts(person_prompts, people)
+    return Request(texts, people, secs, seed, guidance, steps, sflow_steps, indices, own)
 
 
 def check_for_model(req: Request, config: Any, acting: bool = False) -> int:

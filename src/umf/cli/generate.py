@@ -51,6 +51,21 @@ def parse_steps(steps: str | None) -> list[int] | None:
         raise UMFError(f"--steps takes integers like 45,5, got {steps!r}") from exc
 
 
+PERSON_HELP = (
+    "What person K does, beside the scene prompt: the K-th --person is person K (repeat it; "
+    "fewer than the people is fine, the others follow the scene prompt alone)."
+)
+
+
+def check_person_support(config, own) -> None:
+    """Before the model loads: per-person prompts need a model trained with them."""
+    if config is None or not any(p is not None for p in own):
+        return
+    if not (config.pflow.denoiser.person_text and config.sflow.denoiser.person_text):
+        raise UMFError("this model was not trained with per-person prompts (--person): "
+                       "describe everyone in the scene prompt")  # fmt: skip
+
+
 def warn_unknown(pipe, prompts: list[str]) -> None:
     """One warning line on stderr per distinct prompt the model was not trained for."""
     from umf.coverage import warning_line
@@ -113,11 +128,13 @@ def generate(
     ),
     view: bool = typer.Option(False, "--view", help="Then play the scenes in the 3-D page."),
     port: int = typer.Option(8000, help="Port of the --view page (0: any free port)."),
+    person: list[str] = typer.Option([], "--person", help=PERSON_HELP),
 ) -> None:
     """Generate synchronized motion for N people from text."""
     wanted = parse_formats(formats)
     texts = _read_prompts(prompt, prompts)
-    req = check_request(texts, people, seconds, seed, guidance, parse_steps(steps), sflow_steps)
+    req = check_request(texts, people, seconds, seed, guidance, parse_steps(steps), sflow_steps,
+                        person_prompts=person or None)  # fmt: skip
     batch = check_batch(batch, len(texts))
     check_out_dir(out)
     device = check_device(device)
@@ -132,16 +149,19 @@ def generate(
     config = peek_config(model)
     if config is not None:
         check_for_model(req, config)
+    check_person_support(config, req.person_prompts)
     pipe = load_pipeline(model).to(device)
     frames = check_for_model(req, pipe.config)
-    warn_unknown(pipe, texts)
+    pipe.check_person_prompts(req.person_prompts)
+    warn_unknown(pipe, texts + [p for p in req.person_prompts if p is not None])
     clean_stale(out)
     shown = []
     for part in chunks(len(jobs), chunk_size(req.num_people, frames)):
         scenes = pipe([jobs[i][1] for i in part], num_people=req.num_people, seconds=req.seconds,
                       seed=req.seed, guidance=req.guidance, pflow_steps=req.pflow_steps,
                       sflow_steps=req.sflow_steps, anchor=anchor,
-                      sample_indices=[jobs[i][2] for i in part])  # fmt: skip
+                      sample_indices=[jobs[i][2] for i in part],
+                      person_prompts=req.person_prompts or None)  # fmt: skip
         for i, scene in zip(part, scenes, strict=True):
             for path in write_scene(scene, stems[i], wanted):
                 typer.echo(f"wrote {path}")
@@ -150,7 +170,8 @@ def generate(
     if view:
         from umf.cli.serve import view_scenes
 
-        params = {"seed": req.seed, "guidance": req.guidance, "steps": req.pflow_steps}
+        params = {"seed": req.seed, "guidance": req.guidance, "steps": req.pflow_steps,
+                  "person_prompts": list(req.person_prompts) or None}  # fmt: skip
         view_scenes(shown, pipe, params | {"sflow_steps": req.sflow_steps}, port)
 
 
@@ -172,7 +193,9 @@ def react(
         help="Move a gliding body back so planted feet stay put (--no-anchor: the decoded path).",
     ),
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
-) -> None:
+    person: list[str] = typer.Option([], "--person", help="What each added person does, "
+                                     "beside the prompt: the first --person is person 2."),
+) -> None:  # fmt: skip
     """Your own motion as person 1; the model generates the others around it."""
     from umf.data.motion_file import FPS, open_motion
 
@@ -180,6 +203,11 @@ def react(
     req = check_request(prompt, people, seed=seed, guidance=guidance, sflow_steps=sflow_steps)
     if req.num_people < 2:
         raise UMFError(f"--people counts the actor, so it must be at least 2, got {people}")
+    if len(person) > req.num_people - 1:
+        raise UMFError(f"{len(person)} --person prompts for {req.num_people - 1} added "
+                       f"{'person' if req.num_people == 2 else 'people'}")  # fmt: skip
+    own = check_request(prompt, req.num_people, person_prompts=[None, *person]).person_prompts
+    own = own if person else ()
     batch = check_batch(batch, 1)
     start = check_float("--start", start, 0.0, 1e6)
     if seconds is not None:
@@ -191,6 +219,7 @@ def react(
     ]
     check_targets([p for stem in stems for p in scene_targets(stem, wanted, req.num_people)])
     config = peek_config(model)
+    check_person_support(config, own)
     most = (config.vae.max_frames if config is not None else 300) + 1
     count = most if seconds is None else round(seconds * FPS) + 1
     first = round(start * FPS)
@@ -212,12 +241,14 @@ def react(
         end = start + most / FPS
         typer.echo(f"note: the actor motion is longer than {most / FPS:.1f} s; using "
                    f"{start:.1f}-{end:.1f} s (--start/--seconds choose)")  # fmt: skip
-    warn_unknown(pipe, [prompt])
+    pipe.check_person_prompts(own, acting=True)
+    warn_unknown(pipe, [prompt, *person])
     clean_stale(out)
     for part in chunks(batch, chunk_size(req.num_people, joints.shape[0])):
         scenes = pipe([prompt] * len(part), num_people=req.num_people, seed=req.seed,
                       guidance=req.guidance, sflow_steps=req.sflow_steps, actor=joints,
-                      anchor=anchor, sample_indices=list(part))  # fmt: skip
+                      anchor=anchor, sample_indices=list(part),
+                      person_prompts=list(own) or None)  # fmt: skip
         for j, scene in zip(part, scenes, strict=True):
             for path in write_scene(scene, stems[j], wanted):
                 typer.echo(f"wrote {path}")
@@ -237,7 +268,9 @@ def reroll(
         help="Move a gliding body back so planted feet stay put (--no-anchor: the decoded path).",
     ),
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
-) -> None:
+    person_prompt: str | None = typer.Option(None, help="What this person does (default: "
+                                             "what the scene recorded for them, if anything)."),
+) -> None:  # fmt: skip
     """Generate one person of a scene again; everyone else stays exactly as they were."""
     from umf.data.motion_file import FPS, open_motion, open_scene
 
@@ -250,6 +283,8 @@ def reroll(
         check_int("--sflow-steps", sflow_steps, 1, 200)
     if prompt is not None:
         check_request(prompt, 2)
+    if person_prompt is not None:
+        check_request("scene", 2, person_prompts=[person_prompt])
     check_out_dir(out)
     motion = open_motion(scene_file)  # read and checked; resampled and fitted below
     if motion.num_people < 2:
@@ -261,6 +296,7 @@ def reroll(
     if not text.strip():
         raise UMFError(f"{scene_file}: has no prompt; give one with --prompt")
     config = peek_config(model)
+    check_person_support(config, [person_prompt])
     most = (config.vae.max_frames if config is not None else 300) + 1
     if motion.frames > most:
         raise UMFError(f"{scene_file}: {motion.frames / FPS:.1f} s; the model re-rolls scenes of "
@@ -269,9 +305,10 @@ def reroll(
     check_targets(scene_targets(stem, wanted, motion.num_people))
     scene = open_scene(scene_file, motion)  # a 30 fps umf file as it is: the others bit for bit
     pipe = load_pipeline(model)
-    warn_unknown(pipe, [text])
+    warn_unknown(pipe, [text] + ([person_prompt] if person_prompt else []))
     new = pipe.reroll(scene, person, seed=seed, prompt=prompt, guidance=guidance,
-                      sflow_steps=sflow_steps, anchor=anchor)  # fmt: skip
+                      sflow_steps=sflow_steps, anchor=anchor,
+                      person_prompt=person_prompt)  # fmt: skip
     clean_stale(out)
     for path in write_scene(new, stem, wanted):
         typer.echo(f"wrote {path}")

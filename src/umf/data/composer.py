@@ -13,8 +13,16 @@ from umf.data.relations import check_record
 from umf.data.scene_relations import PACED, RELATIONS, Relation
 from umf.data.scenes import MIN_FRAMES, Actor, build_scene
 
+# Relations whose people each do a different action, named only in their own captions
+# (the per-person prompts learn from them): contents drawn uniformly, all different.
+DISTINCT = ("stand_facing",)
+
 
 # --------------------------------------------------------------------- composer
+def _draw(rng, pool: list[Actor]) -> Actor:
+    return pool[int(rng.integers(len(pool)))]
+
+
 def _pick_actors(
     rng,
     relation: Relation,
@@ -45,6 +53,14 @@ def _pick_actors(
         partners = partners_at_pace(leader, pools[leader.content], {} if paces is None else paces)
         partners = partners or [leader]
         return [leader] + [partners[int(rng.integers(len(partners)))] for _ in range(n - 1)]
+    if relation.name in DISTINCT:
+        # two different actions, each action as likely as any other (not each clip: the
+        # raised hands have 30 times the clips of a bow)
+        kinds = sorted({c for c in roles[0] if pools.get(c)})
+        if len(kinds) < n:
+            return None
+        picked = rng.choice(len(kinds), size=n, replace=False)
+        return [_draw(rng, pools[kinds[int(i)]]) for i in picked]
     for contents in roles:
         cands = [a for c in contents for a in pools.get(c, [])]
         if not cands:

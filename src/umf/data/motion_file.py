@@ -11,6 +11,7 @@ which leaves a rigid skeleton's joints as they are), so it can be written in any
 
 from __future__ import annotations
 
+import json
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -155,8 +156,29 @@ def open_scene(path: str | Path, motion: MotionFile | None = None) -> Scene:
     if motion.fps != FPS or "converted_from" in motion.meta:
         return motion.scene()
     bodies = npz_bodies(path, motion.num_people, motion.joints.shape[1])
-    return Scene(motion.joints, None, motion.text, FPS, meta=dict(motion.meta), bodies=bodies,
+    meta = dict(motion.meta)
+    own = npz_person_prompts(path, motion.num_people)
+    if own is not None:
+        meta["person_prompts"] = own
+    return Scene(motion.joints, None, motion.text, FPS, meta=meta, bodies=bodies,
                  fit=bodies is None)  # fmt: skip
+
+
+def npz_person_prompts(path: str | Path, people: int) -> list[str | None] | None:
+    """The per-person prompts a umf .npz scene was generated with (one per person, None
+    where a person followed the scene prompt alone), or None when it holds none usable."""
+    try:
+        with np.load(path, allow_pickle=False) as z:
+            if "person_prompts" not in z.files:
+                return None
+            own = json.loads(str(z["person_prompts"]))
+    except (ValueError, OSError, KeyError):
+        return None
+    if not isinstance(own, list) or len(own) != people:
+        return None
+    if not all(p is None or (isinstance(p, str) and p.strip()) for p in own):
+        return None
+    return own
 
 
 def load_motion(path: str | Path) -> Scene:

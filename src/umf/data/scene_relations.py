@@ -150,6 +150,21 @@ def _greet_captions(rng, actors, n, layout):
     return core
 
 
+# In-place actions of "stand_facing": each person does their own, which only their own
+# prompt names (the per-person prompts; the scene's captions leave the actions open).
+IN_PLACE = (*GESTURES, "call", "respond", "kick", "punch", "slash")
+
+
+def _stand_facing_captions(rng, actors, n, layout):
+    """Name no action: what each person does is in their own captions (the clip's)."""
+    return [
+        "two people stand facing each other.",
+        "two people face each other.",
+        "two people stand opposite each other.",
+        "two people meet face to face.",
+    ]
+
+
 def _bow_back_captions(rng, actors, n, layout):
     return [
         "one person bows and the other bows back.",
@@ -543,6 +558,13 @@ RELATIONS: dict[str, Relation] = {
             _two(("call",), ("respond",)),
             lambda rng, a: _face_each_other(rng, a, int(rng.integers(10, 30))),
             _call_respond_captions,
+            (2,),
+        ),
+        Relation(
+            "stand_facing",
+            _two(IN_PLACE),
+            lambda rng, a: _face_each_other(rng, a, None),
+            _stand_facing_captions,
             (2,),
         ),
         Relation("walk_side_by_side", _two(WALKS), _side_by_side, _walk_together_captions, (2,)),

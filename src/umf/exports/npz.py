@@ -5,7 +5,9 @@ positions it was fitted to (decoder output), the rigid bodies ``offsets`` (N, 22
 ``rotations`` (N, T, 22, 3, 3) local rotations and ``root`` (N, T, 3), ``features``
 (N, T, 262) when the scene was generated, ``text``, ``fps``, ``seed`` (-1: none),
 ``model_version`` and ``umf_version``, and ``coverage`` (JSON: how well the prompt is
-covered by what the model was trained on, :mod:`umf.coverage`) when the model says. Metres,
+covered by what the model was trained on, :mod:`umf.coverage`) when the model says;
+``person_prompts`` and ``person_coverage`` (JSON lists, one entry per person, null for a
+person who followed the scene prompt alone) when the scene was generated with them. Metres,
 Y up, float32.
 """
 
@@ -42,6 +44,9 @@ def scene_arrays(scene: Any) -> dict[str, np.ndarray]:
         arrays["features"] = np.asarray(scene.features, dtype=np.float32)
     if isinstance(scene.meta.get("coverage"), dict):
         arrays["coverage"] = np.array(json.dumps(scene.meta["coverage"]))
+    for key in ("person_prompts", "person_coverage"):
+        if isinstance(scene.meta.get(key), list):
+            arrays[key] = np.array(json.dumps(scene.meta[key]))
     return arrays
 
 

@@ -231,6 +231,11 @@ class FlowTransformer(nn.Module):
             for _ in range(max(1, num_datasets))
         )
         self.prefix = 2 + (num_datasets > 0)
+        # per-person prompts: zero at first, so a model fine-tuned with them starts as it was
+        self.person_proj = nn.Linear(d, d) if cfg.person_text else None
+        if self.person_proj is not None:
+            nn.init.zeros_(self.person_proj.weight)
+            nn.init.zeros_(self.person_proj.bias)
         nn.init.trunc_normal_(self.pos, std=0.02)
         for emb in (self.stage_emb, self.dataset_emb):
             if emb is not None:
@@ -249,9 +254,49 @@ class FlowTransformer(nn.Module):
             rows.append(nn.functional.pad(coarse, (0, 0, 0, self.num_tokens - coarse.shape[0])))
         return torch.stack(rows)
 
-    def encode_text(self, text: TextFeatures) -> Tensor:
-        """(B, d) text token; constant along an ODE, so samplers compute it once."""
-        return self.text_head(text.tokens, text.mask)
+    def encode_text(
+        self,
+        text: TextFeatures,
+        person: TextFeatures | None = None,
+        person_present: Tensor | None = None,
+    ) -> Tensor:
+        """(B, d) text token; constant along an ODE, so samplers compute it once.
+
+        ``person``: each row's own prompt (per-person prompts), added through the same text
+        head and ``person_proj``; ``person_present`` (B,) bool zeroes the rows without one.
+        """
+        cond = self.text_head(text.tokens, text.mask)
+        if person is None:
+            return cond
+        if self.person_proj is None:
+            raise ValueError("this model was not trained with per-person prompts")
+        person = expand_text(person, cond.shape[0])
+        own = self.person_proj(self.text_head(person.tokens, person.mask))
+        if person_present is not None:
+            own = own * person_present.to(device=own.device, dtype=own.dtype)[:, None]
+        return cond + own
+
+    def training_text(
+        self,
+        text: TextFeatures,
+        uncond_text: TextFeatures,
+        drop: Tensor,
+        person: TextFeatures | None = None,
+        person_present: Tensor | None = None,
+        person_drop: Tensor | None = None,
+    ) -> Tensor:
+        """The text token of a training batch: rows in ``drop`` (CFG) get the empty prompt
+        and no own prompt; the others keep theirs unless in ``person_drop``. A model
+        without per-person prompts ignores ``person``."""
+        scene = drop_text(text, uncond_text, drop)
+        if person is None or self.person_proj is None:
+            return self.encode_text(scene)
+        keep = ~drop.to(device=scene.mask.device, dtype=torch.bool)
+        if person_present is not None:
+            keep = keep & person_present.to(keep.device, torch.bool)
+        if person_drop is not None:
+            keep = keep & ~person_drop.to(keep.device, torch.bool)
+        return self.encode_text(scene, person, keep)
 
     # ------------------------------------------------------------------ forward
     def forward(

@@ -65,6 +65,25 @@ def encode_uncond(net: FlowTransformer, uncond_text: TextFeatures, batch: int) -
     return u.expand(batch, -1)
 
 
+def conditioning(
+    net: FlowTransformer,
+    p_person_drop: float,
+    text: TextFeatures,
+    uncond_text: TextFeatures,
+    drop: Tensor,
+    person_text: TextFeatures | None,
+    person_present: Tensor | None,
+    generator: torch.Generator | None,
+) -> TextFeatures | Tensor:
+    """A training batch's text: the scene prompt dropped at ``drop`` (CFG) and, for a model
+    with per-person prompts, each row's own prompt dropped at ``p_person_drop`` too (the
+    draw only happens then, so other models see the random stream they always did)."""
+    if person_text is None or net.person_proj is None:
+        return drop_text(text, uncond_text, drop)
+    person_drop = torch.rand(drop.shape[0], generator=generator, device=drop.device) < p_person_drop
+    return net.training_text(text, uncond_text, drop, person_text, person_present, person_drop)
+
+
 def stage_scales(cfg: PFlowConfig, guidance: GuidanceArg = FROM_CONFIG) -> tuple[float | None, ...]:
     """CFG scale of each pyramid stage, coarse -> fine (None: the plain conditional model).
 
@@ -159,8 +178,13 @@ class PFlow(nn.Module):
         uncond_text: TextFeatures,
         dataset: Tensor | None = None,
         generator: torch.Generator | None = None,
+        person_text: TextFeatures | None = None,
+        person_present: Tensor | None = None,
     ) -> dict[str, Tensor]:
         """Masked pyramid flow-matching loss of a batch; each sample draws its own stage.
+
+        ``person_text`` / ``person_present``: person 1's own prompt where it has one
+        (a model with ``denoiser.person_text``; dropped at ``p_person_drop``).
 
         ``total`` (to backpropagate) = mean over samples of weight * MSE, weight
         ``single_person_weight`` for dataset 0, else 1; ``mse`` (unweighted) and
@@ -172,10 +196,12 @@ class PFlow(nn.Module):
         z1 = self.latent_norm.normalize(z1)
         sample = pyramid_training_sample(z1, self.pyramid, generator=generator)
         drop = torch.rand(b, generator=generator, device=z1.device) < self.cfg.p_uncond
+        cond = conditioning(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
+                            person_text, person_present, generator)  # fmt: skip
         pred = self.net(
             sample.x,
             sample.t,
-            drop_text(text, uncond_text, drop),
+            cond,
             stage=sample.stage,
             dataset=dataset,
             token_mask=sample.mask,
@@ -213,9 +239,15 @@ class PFlow(nn.Module):
         solver: Method | None = None,
         guidance: GuidanceArg = FROM_CONFIG,
         generator: Generators = None,
+        person_text: TextFeatures | None = None,
+        person_present: Tensor | None = None,
     ) -> tuple[Tensor, int]:
         """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) on the VAE's
         scale, and the NFE.
+
+        ``person_text`` (B rows) / ``person_present`` (B,): person 1's own prompt (a model
+        with per-person prompts); guidance is over both prompts (the unconditional side has
+        neither).
 
         Defaults come from the config (per stage: :func:`stage_scales`); ``guidance`` None
         or 1.0 disables CFG, and ``uncond_text`` is needed only when some stage is guided.
@@ -224,10 +256,14 @@ class PFlow(nn.Module):
         Runs in eval mode and restores the previous mode.
         """
         text = repeat_text(text, num_samples)
+        if person_text is not None:
+            person_text = repeat_text(person_text, num_samples)
+            if person_present is not None:
+                person_present = person_present.repeat_interleave(num_samples)
         param = next(self.parameters())
         b = text.tokens.shape[0]
         with evaluating(self):
-            cond: dict[str, Any] = {"text": self.net.encode_text(text)}
+            cond: dict[str, Any] = {"text": self.net.encode_text(text, person_text, person_present)}
             if self.net.num_datasets > 0:
                 ds = torch.as_tensor(dataset, dtype=torch.long, device=param.device)
                 ds = ds.expand(b) if ds.dim() == 0 else ds.repeat_interleave(num_samples)

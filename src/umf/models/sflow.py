@@ -30,12 +30,11 @@ from umf.models.denoiser import (
     FROM_CONFIG,
     FlowTransformer,
     GuidanceArg,
-    drop_text,
     evaluating,
     resolve_guidance,
 )
 from umf.models.latent_normalizer import LatentNormalizer
-from umf.models.pflow import encode_uncond
+from umf.models.pflow import conditioning, encode_uncond
 from umf.text import Pooling, TextFeatures
 
 MULTI_PERSON = 1  # dataset index a shared P-Flow backbone is run with
@@ -131,8 +130,13 @@ class SFlow(nn.Module):
         text: TextFeatures,
         uncond_text: TextFeatures,
         generator: torch.Generator | None = None,
+        person_text: TextFeatures | None = None,
+        person_present: Tensor | None = None,
     ) -> dict[str, Tensor]:
         """Semi-noise loss for reactions ``w`` (B, p, r) to real previous latents.
+
+        ``person_text`` / ``person_present``: the reacting person's own prompt where it has
+        one (a model with ``denoiser.person_text``; dropped at ``p_person_drop``).
 
         ``prev`` (B, n_prev, p, r) with ``prev_mask`` (B, n_prev) (True = that person
         exists). ``total`` = reaction + lambda_recon * recon (backpropagate it); the two
@@ -149,7 +153,9 @@ class SFlow(nn.Module):
         )  # fmt: skip
         b = w.shape[0]
         drop = torch.rand(b, generator=generator, device=w.device) < self.cfg.p_uncond
-        pred = self.velocity(sample.x, sample.t, drop_text(text, uncond_text, drop))
+        cond = conditioning(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
+                            person_text, person_present, generator)  # fmt: skip
+        pred = self.velocity(sample.x, sample.t, cond)
         parts = semi_noise_loss(
             pred,
             sample.target,
@@ -174,17 +180,21 @@ class SFlow(nn.Module):
         solver: Method | None = None,
         guidance: GuidanceArg = FROM_CONFIG,
         generator: Generators = None,
+        person_text: TextFeatures | None = None,
+        person_present: Tensor | None = None,
     ) -> tuple[Tensor, int]:
         """The next person's latent (B, p, r) and the NFE, integrating the ODE once.
 
-        Defaults come from the config; ``guidance`` None or 1.0 disables CFG. NFE counts
-        guided-field evaluations (``steps * evals per solver step``). Runs in eval mode.
+        Defaults come from the config; ``guidance`` None or 1.0 disables CFG (over both
+        prompts: the unconditional side has neither). ``person_text`` / ``person_present``:
+        the new person's own prompt. NFE counts guided-field evaluations (``steps * evals
+        per solver step``). Runs in eval mode.
         """
         b = text.tokens.shape[0]
         scale = resolve_guidance(guidance, self.cfg.guidance)
         with evaluating(self):
             context = self.context(self.latent_norm.normalize(prev), prev_mask)
-            cond: dict[str, Any] = {"text": self.net.encode_text(text)}
+            cond: dict[str, Any] = {"text": self.net.encode_text(text, person_text, person_present)}
             field: Callable[..., Tensor] = self.velocity
             if scale is not None:
                 if uncond_text is None:

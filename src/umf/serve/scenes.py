@@ -202,6 +202,8 @@ class SceneStore:
         """A generated :class:`umf.pipeline.Scene` with its GLB, NPZ and BVH zip written."""
         if isinstance(scene.meta.get("coverage"), dict):
             params = {**params, "coverage": scene.meta["coverage"]}
+        if isinstance(scene.meta.get("person_coverage"), list):
+            params = {**params, "person_coverage": scene.meta["person_coverage"]}
         record = self.new_record(scene.text, scene.joints, float(scene.fps), scene.num_people,
                                  scene.num_frames, params)  # fmt: skip
         record.session = session

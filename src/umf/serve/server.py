@@ -119,7 +119,8 @@ class App:
         try:
             scene = pipe([req.prompt], num_people=req.people, seconds=req.seconds, seed=req.seed,
                          guidance=req.guidance, pflow_steps=req.steps,
-                         sflow_steps=req.sflow_steps, actor=actor)[0]  # fmt: skip
+                         sflow_steps=req.sflow_steps, actor=actor,
+                         person_prompts=list(req.person_prompts) or None)[0]  # fmt: skip
         except UMFError as exc:
             raise RequestError(str(exc)) from None
         finally:
@@ -127,6 +128,8 @@ class App:
         params = {"seed": req.seed, "guidance": req.guidance, "steps": req.steps,
                   "sflow_steps": req.sflow_steps, "actor": req.actor,
                   "generate_seconds": round(time.perf_counter() - begin, 3)}  # fmt: skip
+        if req.person_prompts:
+            params["person_prompts"] = scene.meta.get("person_prompts")
         record = self.scenes.add_scene(scene, params, session)
         return scene_json(record, req.joints)
 
@@ -150,7 +153,7 @@ class App:
             raise RequestError("the server is busy with another scene; try again", 503)
         begin = time.perf_counter()
         try:
-            new = pipe.reroll(scene, req.person, seed=req.seed)
+            new = pipe.reroll(scene, req.person, seed=req.seed, person_prompt=req.person_prompt)
         except UMFError as exc:
             raise RequestError(str(exc)) from None
         finally:
@@ -159,6 +162,9 @@ class App:
                   "reroll": {"person": req.person, "seed": req.seed},
                   "generate_seconds": round(time.perf_counter() - begin, 3)}  # fmt: skip
         params.pop("coverage", None)
+        params.pop("person_coverage", None)
+        if new.meta.get("person_prompts"):
+            params["person_prompts"] = new.meta["person_prompts"]
         return scene_json(self.scenes.add_scene(new, params, session), req.joints)
 
     def _actor_window(self, req: GenerateRequest, pipe: Any, session: str | None) -> np.ndarray:

@@ -23,7 +23,7 @@ MAX_START = 3600.0
 
 FIELDS = {
     "prompt", "people", "seconds", "seed", "guidance", "steps", "sflow_steps",
-    "actor", "actor_person", "start", "joints",
+    "actor", "actor_person", "start", "joints", "person_prompts",
 }  # fmt: skip
 
 
@@ -50,6 +50,7 @@ class GenerateRequest:
     actor_person: int = 1
     start: float = 0.0
     joints: bool = True
+    person_prompts: tuple[str | None, ...] = ()  # the K-th for person K; None: scene only
 
 
 def _int(body: dict[str, Any], name: str, default: int | None, lo: int, hi: int) -> int | None:
@@ -80,12 +81,34 @@ def _prompt(body: dict[str, Any]) -> str:
     prompt = body.get("prompt")
     if not isinstance(prompt, str):
         raise RequestError("'prompt' is required and must be a string")
-    prompt = " ".join(prompt.split())
-    if not prompt:
-        raise RequestError("the prompt is empty")
-    if len(prompt) > MAX_PROMPT_CHARS:
-        raise RequestError(f"the prompt is longer than {MAX_PROMPT_CHARS} characters")
-    return prompt
+    return _text(prompt, "the prompt")
+
+
+def _text(text: str, what: str) -> str:
+    text = " ".join(text.split())
+    if not text:
+        raise RequestError(f"{what} is empty")
+    if len(text) > MAX_PROMPT_CHARS:
+        raise RequestError(f"{what} is longer than {MAX_PROMPT_CHARS} characters")
+    return text
+
+
+def _person_prompts(body: dict[str, Any], people: int) -> tuple[str | None, ...]:
+    """``person_prompts``: a list, the K-th for person K; null or "" for a person who
+    follows the scene prompt alone; at most one per person."""
+    value = body.get("person_prompts")
+    if value is None:
+        return ()
+    if not isinstance(value, list):
+        raise RequestError("'person_prompts' must be a list of strings (null: scene prompt only)")
+    if len(value) > people:
+        raise RequestError(f"'person_prompts' has {len(value)} entries for {people} people")
+    out: list[str | None] = []
+    for k, p in enumerate(value, 1):
+        if p is not None and not isinstance(p, str):
+            raise RequestError(f"'person_prompts' entry {k} must be a string or null")
+        out.append(None if p is None or not p.strip() else _text(p, f"person {k}'s prompt"))
+    return tuple(out)
 
 
 def parse_steps(value: Any) -> tuple[int, ...] | None:
@@ -137,10 +160,11 @@ def parse_generate(body: Any) -> GenerateRequest:
         actor_person=_int(body, "actor_person", 1, 1, MAX_PEOPLE),
         start=_float(body, "start", 0.0, 0.0, MAX_START),
         joints=joints,
+        person_prompts=_person_prompts(body, people or 2),
     )
 
 
-REROLL_FIELDS = {"scene", "person", "seed", "joints"}
+REROLL_FIELDS = {"scene", "person", "seed", "joints", "person_prompt"}
 
 
 @dataclass(frozen=True)
@@ -151,6 +175,7 @@ class RerollRequest:
     person: int
     seed: int = 0
     joints: bool = True
+    person_prompt: str | None = None  # what the person does (None: as the scene recorded)
 
 
 def parse_reroll(body: Any) -> RerollRequest:
@@ -170,4 +195,8 @@ def parse_reroll(body: Any) -> RerollRequest:
     joints = body.get("joints", True)
     if not isinstance(joints, bool):
         raise RequestError("'joints' must be true or false")
-    return RerollRequest(scene, person, _int(body, "seed", 0, 0, MAX_SEED), joints)
+    own = body.get("person_prompt")
+    if own is not None and not isinstance(own, str):
+        raise RequestError("'person_prompt' must be a string")
+    own = None if own is None or not own.strip() else _text(own, "the person prompt")
+    return RerollRequest(scene, person, _int(body, "seed", 0, 0, MAX_SEED), joints, own)

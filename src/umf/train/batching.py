@@ -23,6 +23,8 @@ def _meta(items: list[dict[str, Any]]) -> dict[str, Any]:
     return {
         "lengths": torch.tensor([it["length"] for it in items], dtype=torch.long),
         "captions": [it["caption"] for it in items],
+        # each person's own caption ("" = none): single items one, scenes one per person
+        "person_captions": [list(it.get("person_captions", [])) for it in items],
         "dataset": torch.tensor([it["dataset"] for it in items], dtype=torch.long),
         "ids": [it["id"] for it in items],
     }

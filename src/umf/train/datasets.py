@@ -50,6 +50,8 @@ from umf.train.extension import SETTLE, extend_person, extension_period
 
 Tensor = torch.Tensor
 
+# Chance that a single-person item carries an own prompt (one of its clip's wordings)
+OWN_SINGLE = 0.5
 PLACEMENT_RADIUS = 3.0  # metres: people of a scene stand within a few metres of each other
 SINGLE_PERSON, MULTI_PERSON = 0, 1  # the dataset token of P-Flow
 
@@ -97,6 +99,14 @@ def preferred_spellings(captions: Sequence[str]) -> tuple[str, ...]:
     counts = Counter(w.lower() for c in captions for w in _SPELL_RE.findall(c))
     return tuple(sorted(f"{a}={b}" for a, b in _SPELLINGS.items()
                         if counts[a] == 0 and counts[b] > 0))  # fmt: skip
+
+
+def own_caption(captions: Sequence[str], rng: np.random.Generator, present: float = 1.0) -> str:
+    """A person's own caption (their per-person prompt in training): one of their clip's
+    wordings with chance ``present``, else "" (no own prompt)."""
+    if not captions or rng.random() >= present:
+        return ""
+    return captions[int(rng.integers(len(captions)))]
 
 
 def crop_window(
@@ -368,10 +378,17 @@ class SingleMotionDataset(_EpochDataset):
             f = place_features(f, yaw, float(dx), float(dz))
         f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror, self.respell)
         key = clip.id if clip.num_people == 1 else f"{clip.id}/p{person}"
+        # own prompt: half the single-person items repeat their action in it (a stream of
+        # its own, so every other draw stays as it was); a person of a take has none
+        own = ""
+        if clip.num_people == 1:
+            own = own_caption(clip.captions, item_rng(self.seed, self.epoch, index, stream=2),
+                              present=OWN_SINGLE)  # fmt: skip
         return {
             "features": f,
             "length": length,
             "caption": caption,
+            "person_captions": [mirror_caption(own) if mirrored else own],
             "dataset": SINGLE_PERSON if clip.num_people == 1 else MULTI_PERSON,
             "id": key,
             "start": start,
@@ -446,6 +463,19 @@ class SceneDataset(_EpochDataset):
         if not self.items:
             raise UMFError(f"{corpus.root}: no multi-person scenes in split {split!r}")
         corpus.actors()  # built once here, so worker processes inherit it
+        self.clip_captions = {c.id: c.captions for c in corpus.clips}
+
+    def _own_captions(self, kind: str, item: Any, index: int) -> list[str]:
+        """Each person's own caption: a wording of the clip a composed person plays
+        (mirrored with the person); "" for the people of a real take (no own captions)."""
+        if kind == "clip":
+            return [""] * item.num_people
+        rng = item_rng(self.seed, self.epoch, index, stream=2)
+        out = []
+        for p in item["people"]:
+            own = own_caption(self.clip_captions.get(p["clip"], []), rng)
+            out.append(mirror_caption(own) if p.get("mirrored") else own)
+        return out
 
     def __len__(self) -> int:
         return len(self.items)
@@ -465,11 +495,13 @@ class SceneDataset(_EpochDataset):
         caption = captions[int(rng.integers(len(captions)))] if captions else ""
         f = canonicalize_features(self._crop(kind, item, tf, start, length))
         f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror, self.respell)
+        own = self._own_captions(kind, item, index)
         return {
             "features": f,
             "length": length,
             "num_people": int(f.shape[0]),
             "caption": caption,
+            "person_captions": [mirror_caption(c) if mirrored else c for c in own],
             "dataset": MULTI_PERSON,
             "id": item.id if kind == "clip" else item["id"],
             "start": start,

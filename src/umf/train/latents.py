@@ -32,13 +32,14 @@ def build_bank(
 ) -> dict[str, Any]:
     """Encode ``passes`` epochs of ``dataset`` (single or scene items) with ``vae``.
 
-    Returns ``z`` (N, P, p, r) posterior means, ``people_mask`` (N, P), ``dataset`` (N,)
-    and ``captions`` (N), on the CPU. Single-person items have P = 1. ``device`` runs the
+    Returns ``z`` (N, P, p, r) posterior means, ``people_mask`` (N, P), ``dataset`` (N,),
+    ``captions`` (N) and ``person_captions`` (N lists, each person's own), on the CPU.
+    Single-person items have P = 1. ``device`` runs the
     encoder there (the VAE is moved back to where it was afterwards).
     """
     home = next(vae.parameters()).device
     vae.eval().to(device)
-    zs, masks, datasets, captions = [], [], [], []
+    zs, masks, datasets, captions, own = [], [], [], [], []
     total = passes * len(dataset)
     bar = tqdm(total=total, desc=desc, unit="crop", disable=not progress)
     for epoch in range(passes):
@@ -63,13 +64,15 @@ def build_bank(
             masks.append(people)
             datasets.append(torch.as_tensor(batch["dataset"], dtype=torch.long).reshape(-1))
             captions.extend(batch["captions"])
+            own.extend(batch.get("person_captions", [[] for _ in batch["captions"]]))
             bar.update(feats.shape[0])
     bar.close()
     vae.to(home)
     p_max = max(z.shape[1] for z in zs)
     z = torch.cat([_pad_people(z, p_max) for z in zs])
     people = torch.cat([_pad_people(m, p_max) for m in masks])
-    return {"z": z, "people_mask": people, "dataset": torch.cat(datasets), "captions": captions}
+    return {"z": z, "people_mask": people, "dataset": torch.cat(datasets), "captions": captions,
+            "person_captions": own}  # fmt: skip
 
 
 def _pad_people(x: Tensor, p: int) -> Tensor:
@@ -94,10 +97,11 @@ class LatentBankDataset(Dataset):
 
     def __getitem__(self, i: int) -> dict[str, Any]:
         z, people = self.bank["z"][i], self.bank["people_mask"][i]
+        own = list(self.bank.get("person_captions", [[]] * len(self))[i])
         if self.first:
-            z, people = z[:1], people[:1]
+            z, people, own = z[:1], people[:1], own[:1]
         return {"z": z, "people_mask": people, "caption": self.bank["captions"][i],
-                "dataset": int(self.bank["dataset"][i])}  # fmt: skip
+                "person_captions": own, "dataset": int(self.bank["dataset"][i])}  # fmt: skip
 
     @staticmethod
     def collate(items: list[dict[str, Any]]) -> dict[str, Any]:
@@ -105,6 +109,7 @@ class LatentBankDataset(Dataset):
             "z": torch.stack([it["z"] for it in items]),
             "people_mask": torch.stack([it["people_mask"] for it in items]),
             "captions": [it["caption"] for it in items],
+            "person_captions": [it["person_captions"] for it in items],
             "dataset": torch.tensor([it["dataset"] for it in items], dtype=torch.long),
         }
 

@@ -407,12 +407,16 @@ def train_stage(
 
         module = st.trainable()
         own = module.state_dict()
-        weights = checked_weights(init, stage, module, may_lack="detail_gain")
+        weights = checked_weights(init, stage, module, may_lack=GROWN)
         # a model without detail gains (trained before pflow.detail_norm) keeps the ones
-        # just fitted, refitted under its own latent mean and std
-        fresh = [k for k in own if k.endswith("detail_gain") and k not in weights]
-        weights.update({k: own[k] for k in fresh})
+        # just fitted, refitted under its own latent mean and std; one without per-person
+        # prompts gets the zero projection (it computes what it did before)
+        grown = [k for k in own if k.endswith(GROWN) and k not in weights]
+        weights.update({k: own[k] for k in grown})
         module.load_state_dict({k: v.to(own[k].dtype) for k, v in weights.items()})
+        fresh = [k for k in grown if k.endswith("detail_gain")]
+        if grown:
+            log(f"{stage}: new in this run, not in {init}: {', '.join(sorted(grown))}")
         if fresh and latents is not None:
             module.latent_norm.fit_detail(latents)
         log(f"{stage}: starting from the weights of {init}")
@@ -466,6 +470,10 @@ def export_model(
         out, weights, config=cfg.to_dict(), normalizer=ck.normalizer,
         dtype=torch.float16 if fp16 else None,
     )  # fmt: skip
+
+
+# Weights a fine-tune may add to the model it starts from: new ones start as built
+GROWN = ("detail_gain", "person_proj.weight", "person_proj.bias")
 
 
 # Fine-tuning a released model on a new corpus (`umf train finetune`): what each stage changes

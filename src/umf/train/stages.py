@@ -140,6 +140,25 @@ class _LatentStage:
         uncond = self.text.encode([""] * len(captions)).to(device)
         return text, uncond
 
+    def person_text(
+        self, net: nn.Module, own: list[str], device
+    ) -> dict[str, TextFeatures | Tensor]:
+        """The flow's per-person keywords for these own captions ("" = none), or nothing
+        when the model has no per-person prompts."""
+        if getattr(net, "person_proj", None) is None:
+            return {}
+        present = torch.tensor([bool(c) for c in own], dtype=torch.bool, device=device)
+        return {"person_text": self.text.encode(own).to(device), "person_present": present}
+
+
+def own_captions(batch: dict[str, Any], person: list[int] | Tensor) -> list[str]:
+    """Each row's own caption of person ``person[i]`` ("" where the item has none)."""
+    owns = batch.get("person_captions") or [[]] * len(person)
+    if not any(c for own in owns for c in own):  # none at all: the indices are not read
+        return [""] * len(person)
+    ks = person.tolist() if isinstance(person, Tensor) else list(person)
+    return [own[k] if k < len(own) else "" for own, k in zip(owns, ks, strict=True)]
+
 
 class PFlowStage(_LatentStage):
     name = "pflow"
@@ -157,29 +176,33 @@ class PFlowStage(_LatentStage):
         return self.pflow
 
     def _inputs(self, batch):
+        own = own_captions(batch, [0] * len(batch["captions"]))  # person 1's
         if "z" in batch:  # from a latent bank
             z1 = batch["z"][:, 0]
-            return z1, batch["dataset"].long().to(z1.device), batch["captions"]
+            return z1, batch["dataset"].long().to(z1.device), batch["captions"], own
         if _is_scene(batch):  # person 1 of each scene, multi-person corpus
             x, mask = batch["features"][:, 0], batch["mask"]
             dataset = torch.ones(x.shape[0], dtype=torch.long)
         else:
             x, mask = batch["features"], batch["mask"]
             dataset = batch["dataset"].long()
-        return self.latents(x, mask), dataset.to(x.device), batch["captions"]
+        return self.latents(x, mask), dataset.to(x.device), batch["captions"], own
 
     def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
-        z1, dataset, captions = self._inputs(batch)
+        z1, dataset, captions, own = self._inputs(batch)
         text, uncond = self.encode_text(captions, z1.device)
         gen = self.generator.on(z1.device)
-        return self.pflow(z1, text, uncond, dataset=dataset, generator=gen)
+        person = self.person_text(self.pflow.net, own, z1.device)
+        return self.pflow(z1, text, uncond, dataset=dataset, generator=gen, **person)
 
     @torch.no_grad()
     def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
-        z1, dataset, captions = self._inputs(batch)
+        z1, dataset, captions, own = self._inputs(batch)
         text, uncond = self.encode_text(captions, z1.device)
         gen = DeviceGenerator(1234).on(z1.device)  # same noise every validation
-        return {k: float(v) for k, v in self.pflow.loss(z1, text, uncond, dataset, gen).items()}
+        person = self.person_text(self.pflow.net, own, z1.device)
+        losses = self.pflow.loss(z1, text, uncond, dataset, gen, **person)
+        return {k: float(v) for k, v in losses.items()}
 
 
 class SFlowStage(_LatentStage):
@@ -215,18 +238,20 @@ class SFlowStage(_LatentStage):
         k = torch.minimum(k, counts - 1).clamp_min(1)
         prev_mask = torch.arange(p_max, device=device)[None, :] < k[:, None]
         w = lat[torch.arange(b, device=device), k]
-        return lat, prev_mask, w, batch["captions"]
+        return lat, prev_mask, w, batch["captions"], own_captions(batch, k)
 
     def training_step(self, batch: dict[str, Any], step: int) -> dict[str, Tensor]:
-        prev, prev_mask, w, captions = self._inputs(batch)
+        prev, prev_mask, w, captions, own = self._inputs(batch)
         text, uncond = self.encode_text(captions, w.device)
         gen = self.generator.on(w.device)
-        return self.sflow(prev, prev_mask, w, text, uncond, generator=gen)
+        person = self.person_text(self.sflow.net, own, w.device)
+        return self.sflow(prev, prev_mask, w, text, uncond, generator=gen, **person)
 
     @torch.no_grad()
     def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
-        prev, prev_mask, w, captions = self._inputs(batch)
+        prev, prev_mask, w, captions, own = self._inputs(batch)
         text, uncond = self.encode_text(captions, w.device)
         gen = DeviceGenerator(1234).on(w.device)
-        losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen)
+        person = self.person_text(self.sflow.net, own, w.device)
+        losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen, **person)
         return {k: float(v) for k, v in losses.items()}

@@ -64,7 +64,35 @@ function request() {
     body.actor_person = Number($("actor-person").value);
     body.start = Number($("actor-start").value);
   }
+  const own = personPrompts();
+  if (own.some((p) => p !== null)) body.person_prompts = own;
   return body;
+}
+
+// One optional text box per person: the K-th box is person K's own prompt.
+function setPersonBoxes() {
+  const box = $("person-prompts");
+  const people = Math.max(1, Math.min(16, Number($("people").value) || 1));
+  while (box.children.length < people) {
+    const k = box.children.length + 1;
+    const label = document.createElement("label");
+    label.textContent = `Person ${k} `;
+    const input = document.createElement("input");
+    input.type = "text";
+    input.id = `person-${k}`;
+    input.maxLength = 500;
+    input.placeholder = k === 1 ? "e.g. raises both hands" : "e.g. bows";
+    label.appendChild(input);
+    box.appendChild(label);
+  }
+  while (box.children.length > people) box.lastChild.remove();
+}
+
+function personPrompts() {
+  const inputs = [...$("person-prompts").querySelectorAll("input")];
+  const own = inputs.map((input) => input.value.trim() || null);
+  while (own.length && own[own.length - 1] === null) own.pop();
+  return own;
 }
 
 async function generate(event) {
@@ -123,11 +151,18 @@ async function show(scene) {
   setStatus("Loading the scene into the viewer…", { busy: true });
   await viewer.load(scene.files.glb, scene.fps);
   $("caption").textContent = scene.text;
+  const warnings = [];
   const cov = scene.coverage;
-  $("coverage").hidden = !(cov && cov.known === false);
-  $("coverage").textContent = cov && cov.known === false
-    ? `Outside what this model was trained on (coverage ${cov.score.toFixed(2)}); nearest known: ${cov.nearest.join("; ")}`
-    : "";
+  if (cov && cov.known === false) {
+    warnings.push(`Outside what this model was trained on (coverage ${cov.score.toFixed(2)}); nearest known: ${cov.nearest.join("; ")}`);
+  }
+  (scene.person_coverage || []).forEach((c, i) => {
+    if (c && c.known === false) {
+      warnings.push(`Person ${i + 1}'s prompt is outside what this model was trained on (coverage ${c.score.toFixed(2)}); nearest known: ${c.nearest.join("; ")}`);
+    }
+  });
+  $("coverage").hidden = warnings.length === 0;
+  $("coverage").textContent = warnings.join(" ");
   $("scrubber").max = viewer.frames - 1;
   setDownloads(scene);
   setReroll(scene);
@@ -157,10 +192,14 @@ async function reroll(scene, person) {
   const buttons = $("reroll-buttons").querySelectorAll("button");
   buttons.forEach((b) => { b.disabled = true; });
   const seed = Math.floor(Math.random() * 2 ** 31);
+  const body = { scene: scene.id, person, seed, joints: false };
+  // a filled box "Person K" tells the re-rolled person what to do; empty: as recorded
+  const own = personPrompts()[person - 1];
+  if (own) body.person_prompt = own;
   const pending = api("/api/reroll", {
     method: "POST",
     headers: { "Content-Type": "application/json" },
-    body: JSON.stringify({ scene: scene.id, person, seed, joints: false }),
+    body: JSON.stringify(body),
   });
   watchGeneration(pending);
   try {
@@ -263,6 +302,8 @@ async function start() {
     $("seed").value = Math.floor(Math.random() * 2 ** 31);
   });
   $("actor-file").addEventListener("change", upload);
+  $("people").addEventListener("input", setPersonBoxes);
+  setPersonBoxes();
   $("dl-mp4").addEventListener("click", downloadVideo);
   try {
     const health = await api("/api/health");

@@ -1,0 +1,162 @@
+"""Per-person prompts in the flows: a zero-initialised own-prompt projection (a model
+fine-tuned with it starts as the model it came from), dropout of the own prompt in
+training, guidance over both prompts, and a toy where only the own prompt says what to do."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import pytest
+import torch
+
+from test_denoiser import D_TEXT, make_text, tiny_denoiser
+from umf.config import PFlowConfig, SFlowConfig
+from umf.models.denoiser import expand_text
+from umf.models.pflow import PFlow
+from umf.models.sflow import SFlow
+from umf.text import TextFeatures
+
+P, R = 16, 8
+
+pytestmark = pytest.mark.usefixtures("one_thread")  # tiny models: see conftest
+
+
+def pflow(person: bool, **kw: Any) -> PFlow:
+    torch.manual_seed(0)
+    cfg = PFlowConfig(denoiser=tiny_denoiser(person_text=person), **{"steps": (3, 2), **kw})
+    return PFlow(cfg, P, R, D_TEXT)
+
+
+def sflow(person: bool, **kw: Any) -> SFlow:
+    torch.manual_seed(0)
+    cfg = SFlowConfig(denoiser=tiny_denoiser(person_text=person), steps=3, **kw)
+    return SFlow(cfg, P, R, D_TEXT)
+
+
+def grown(old: torch.nn.Module, new: torch.nn.Module) -> torch.nn.Module:
+    """``new`` with ``old``'s weights and its own (zero) person projection: a fine-tune's
+    starting point."""
+    missing, unexpected = new.load_state_dict(old.state_dict(), strict=False)
+    assert not unexpected and missing and all("person_proj" in k for k in missing)
+    return new
+
+
+def randomise_projection(model: torch.nn.Module) -> None:
+    with torch.no_grad():
+        for name, p in model.named_parameters():
+            if "person_proj" in name:
+                p.copy_(torch.randn(p.shape, generator=torch.Generator().manual_seed(3)) * 0.3)
+
+
+def test_a_grown_pflow_computes_what_it_did_before() -> None:
+    old, new = pflow(False), grown(pflow(False), pflow(True))
+    z1 = torch.randn(4, P, R, generator=torch.Generator().manual_seed(0))
+    text, empty, own = make_text(4, seed=1), make_text(1, length=2, seed=2), make_text(4, seed=5)
+    ds = torch.tensor([0, 1, 0, 1])
+    a = old.loss(z1, text, empty, ds, generator=torch.Generator().manual_seed(1))
+    b = new.loss(z1, text, empty, ds, generator=torch.Generator().manual_seed(1),
+                 person_text=own, person_present=torch.ones(4, dtype=torch.bool))  # fmt: skip
+    # the own-prompt dropout draws once more, after every draw the old loss makes
+    assert float(a["total"].detach()) == pytest.approx(float(b["total"].detach()), rel=1e-6)
+    za, _ = old.sample(text, empty, generator=torch.Generator().manual_seed(0))
+    zb, _ = new.sample(text, empty, generator=torch.Generator().manual_seed(0), person_text=own)
+    assert torch.allclose(za, zb, atol=1e-6)
+
+
+def test_the_own_prompt_reaches_the_velocity_only_where_present() -> None:
+    model = pflow(True)
+    randomise_projection(model)
+    text, own, other = make_text(3, seed=1), make_text(3, seed=5), make_text(3, seed=6)
+    none = model.net.encode_text(text)
+    present = torch.tensor([True, False, True])
+    with_own = model.net.encode_text(text, own, present)
+    with_other = model.net.encode_text(text, other, present)
+    assert torch.equal(with_own[1], none[1]) and torch.equal(with_other[1], none[1])
+    for i in (0, 2):
+        assert not torch.allclose(with_own[i], none[i])
+        assert not torch.allclose(with_own[i], with_other[i])
+    with pytest.raises(ValueError, match="per-person"):
+        pflow(False).net.encode_text(text, own)
+
+
+def test_gradients_reach_the_projection_and_dropout_silences_it() -> None:
+    model = pflow(True, p_uncond=0.0, p_person_drop=0.0)
+    z1 = torch.randn(4, P, R, generator=torch.Generator().manual_seed(0))
+    text, empty, own = make_text(4, seed=1), make_text(1, length=2, seed=2), make_text(4, seed=5)
+    ds = torch.ones(4, dtype=torch.long)
+    out = model.loss(z1, text, empty, ds, generator=torch.Generator().manual_seed(1),
+                     person_text=own, person_present=torch.ones(4, dtype=torch.bool))  # fmt: skip
+    out["total"].backward()
+    assert model.net.person_proj.weight.grad.abs().sum() > 0
+    randomise_projection(model)
+
+    def total(person_text: TextFeatures, drop: float) -> float:
+        model.cfg.p_person_drop = drop
+        gen = torch.Generator().manual_seed(1)
+        present = torch.ones(4, dtype=torch.bool)
+        return float(model.loss(z1, text, empty, ds, generator=gen, person_text=person_text,
+                                person_present=present)["total"].detach())  # fmt: skip
+
+    other = make_text(4, seed=9)
+    assert total(own, 1.0) == pytest.approx(total(other, 1.0), rel=1e-6)  # always dropped
+    assert total(own, 0.0) != pytest.approx(total(other, 0.0), rel=1e-6)  # always kept
+
+
+def test_sflow_own_prompt_changes_the_reaction_and_guidance_has_neither() -> None:
+    old, new = sflow(False), grown(sflow(False), sflow(True))
+    prev = torch.randn(2, 1, P, R, generator=torch.Generator().manual_seed(0))
+    mask = torch.ones(2, 1, dtype=torch.bool)
+    text, empty, own = make_text(2, seed=1), make_text(1, length=2, seed=2), make_text(2, seed=5)
+    wa, _ = old.sample(prev, mask, text, empty, generator=torch.Generator().manual_seed(0))
+    wb, _ = new.sample(prev, mask, text, empty, generator=torch.Generator().manual_seed(0),
+                       person_text=own)  # fmt: skip
+    assert torch.allclose(wa, wb, atol=1e-6)  # zero projection: as before
+    randomise_projection(new)
+    wc, _ = new.sample(prev, mask, text, empty, generator=torch.Generator().manual_seed(0),
+                       person_text=own)  # fmt: skip
+    assert not torch.allclose(wa, wc, atol=1e-3)
+    # the unconditional side of guidance sees no own prompt: at scale 0 it alone remains
+    u1, _ = new.sample(prev, mask, text, empty, guidance=0.0,
+                       generator=torch.Generator().manual_seed(0), person_text=own)  # fmt: skip
+    u2, _ = new.sample(prev, mask, text, empty, guidance=0.0,
+                       generator=torch.Generator().manual_seed(0))  # fmt: skip
+    assert torch.allclose(u1, u2, atol=1e-6)
+
+
+def test_toy_only_the_own_prompt_tells_the_action() -> None:
+    """One scene prompt for every item; the latent pattern follows the own prompt. After
+    training, samples follow the own prompt asked for, and without one they sit between."""
+    torch.manual_seed(0)
+    g = torch.Generator().manual_seed(0)
+    patterns = torch.randn(2, P, R, generator=g)
+    scene = make_text(1, length=4, seed=7)
+    owns = make_text(2, length=4, seed=11)
+    empty = make_text(1, length=2, seed=8)
+    cfg = PFlowConfig(denoiser=tiny_denoiser(num_layers=2, person_text=True), steps=(6, 4),
+                      p_person_drop=0.2)  # fmt: skip
+    model = PFlow(cfg, P, R, D_TEXT)
+    opt = torch.optim.AdamW(model.parameters(), lr=5e-3)
+    b = 16
+    text = expand_text(scene, b)
+    for _ in range(250):
+        cls = torch.randint(0, 2, (b,), generator=g)
+        z1 = patterns[cls] + 0.1 * torch.randn(b, P, R, generator=g)
+        own = TextFeatures(owns.tokens[cls], owns.mask[cls], owns.pooled[cls])
+        loss = model.loss(
+            z1,
+            text,
+            empty,
+            torch.ones(b, dtype=torch.long),
+            generator=g,
+            person_text=own,
+            person_present=torch.ones(b, dtype=torch.bool),
+        )
+        opt.zero_grad()
+        loss["total"].backward()
+        opt.step()
+    two = expand_text(scene, 2)
+    z, _ = model.sample(two, empty, num_samples=16, guidance=1.0, generator=g, person_text=owns)
+    for c in range(2):
+        mean = z[c * 16 : (c + 1) * 16].mean(0)
+        right, wrong = (mean - patterns[c]).norm(), (mean - patterns[1 - c]).norm()
+        assert right < 0.5 * wrong, (c, float(right), float(wrong))

@@ -1,0 +1,173 @@
+"""Per-person prompts through the pipeline, the files, re-rolls, the CLI and the JSON API
+(tiny models: a random own-prompt projection, so an own prompt changes what it drives)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from conftest import MODULE, FakeText, save_tiny_model
+from umf.errors import UMFError
+from umf.pipeline import UMFPipeline
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+SCENE = "two people stand facing each other"
+
+
+@pytest.fixture(scope=MODULE)
+def model(tmp_path_factory):
+    return save_tiny_model(tmp_path_factory.mktemp("own") / "model", seed=2, person_prompts=True)
+
+
+@pytest.fixture(scope=MODULE)
+def pipe(model):
+    return UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+
+
+@pytest.fixture(scope=MODULE)
+def plain(tmp_path_factory):
+    path = save_tiny_model(tmp_path_factory.mktemp("plain") / "model", seed=2)
+    return path, UMFPipeline.from_pretrained(path, text_encoder=FakeText())
+
+
+def _gen(pipe, own=None, people=2, seed=3):
+    return pipe(SCENE, num_people=people, seconds=1.0, seed=seed, person_prompts=own,
+                fit=False, separate=False)[0]  # fmt: skip
+
+
+def test_each_prompt_drives_its_own_person(pipe):
+    base = _gen(pipe)
+    second = _gen(pipe, [None, "bows"])
+    first = _gen(pipe, ["raises both hands"])
+    # person 2's prompt leaves person 1 exactly as it was; person 1's changes person 1
+    assert np.array_equal(second.joints[0], base.joints[0])
+    assert np.abs(second.joints[1] - base.joints[1]).max() > 1e-3
+    assert np.abs(first.joints[0] - base.joints[0]).max() > 1e-3
+    swapped = _gen(pipe, ["bows", "raises both hands"])
+    both = _gen(pipe, ["raises both hands", "bows"])
+    assert not np.allclose(swapped.joints, both.joints)
+    assert np.array_equal(_gen(pipe, ["raises both hands", "bows"]).joints, both.joints)
+    assert both.meta["person_prompts"] == ["raises both hands", "bows"]
+    assert second.meta["person_prompts"] == [None, "bows"]
+    assert "person_prompts" not in base.meta
+    three = _gen(pipe, ["waves"], people=3)
+    assert three.meta["person_prompts"] == ["waves", None, None]
+
+
+def test_bad_person_prompts_are_one_clear_error(pipe, plain):
+    for own, needle in ((["a", "b", "c"], "3 person prompts for 2 people"),
+                        ([" "], "the person prompt is empty"),
+                        ([3], "every person prompt must be a string"),
+                        ("bows", "must be a list"),
+                        (["x" * 1001], "at most 1000 characters")):  # fmt: skip
+        with pytest.raises(UMFError, match=needle):
+            _gen(pipe, own)
+    with pytest.raises(UMFError, match="not trained with per-person prompts"):
+        _gen(plain[1], ["bows"])
+    _gen(plain[1], [None, None])  # nothing asked of it: fine
+
+
+def test_files_record_them_and_a_reroll_keeps_what_the_person_was_asked(pipe, tmp_path):
+    from umf.data.motion_file import open_scene
+
+    scene = pipe(SCENE, num_people=2, seconds=1.0, seed=3, person_prompts=[None, "bows"])[0]
+    (path,) = scene.save(tmp_path / "scene", ["npz"])
+    with np.load(path) as z:
+        assert json.loads(str(z["person_prompts"])) == [None, "bows"]
+    back = open_scene(path)
+    assert back.meta["person_prompts"] == [None, "bows"]
+    recorded = pipe.reroll(back, 2, seed=5)
+    asked = pipe.reroll(back, 2, seed=5, person_prompt="bows")
+    other = pipe.reroll(back, 2, seed=5, person_prompt="waves with the left hand")
+    assert np.array_equal(recorded.joints, asked.joints)
+    assert not np.allclose(other.joints[1], asked.joints[1])
+    assert np.array_equal(other.joints[0], back.joints[0])  # everyone else bit for bit
+    assert other.meta["person_prompts"] == [None, "waves with the left hand"]
+    assert other.meta["rerolled"][-1]["person_prompt"] == "waves with the left hand"
+
+
+def test_cli_person_options(model, plain, tmp_path, fake_text, capsys):
+    from umf.cli.main import run
+
+    out = tmp_path / "gen"
+    with pytest.raises(SystemExit) as done:
+        run(
+            [
+                "generate",
+                SCENE,
+                "--people",
+                "2",
+                "--seconds",
+                "1",
+                "--person",
+                "raises both hands",
+                "--person",
+                "bows",
+                "--format",
+                "npz",
+                "--out",
+                str(out),
+                "--model",
+                str(model),
+            ]
+        )
+    assert done.value.code in (0, None)
+    (npz,) = out.glob("*.npz")
+    with np.load(npz) as z:
+        assert json.loads(str(z["person_prompts"])) == ["raises both hands", "bows"]
+    capsys.readouterr()
+    for args, needle in (([str(model), "--person", "a", "--person", "b", "--person", "c"],
+                          "3 person prompts for 2 people"),
+                         ([str(plain[0]), "--person", "bows"],
+                          "not trained with per-person prompts")):  # fmt: skip
+        bad = tmp_path / "bad"
+        with pytest.raises(SystemExit) as exit_:
+            run(["generate", SCENE, "--people", "2", "--seconds", "1", "--format", "npz",
+                 "--out", str(bad), "--model", *args])  # fmt: skip
+        err = capsys.readouterr().err
+        assert exit_.value.code == 1 and needle in err and err.count("\n") == 1, err
+        assert not list(bad.glob("*.npz"))
+    # umf react: the first --person is person 2 (person 1 is the given motion)
+    react = tmp_path / "react"
+    actor = str(Path(__file__).parent / "clips" / "dataset-2_raise-up-both-hands_normal_001.bvh")
+    with pytest.raises(SystemExit) as done:
+        run(["react", SCENE, "--actor", actor, "--people", "2", "--person", "bows",
+             "--format", "npz", "--out", str(react), "--model", str(model)])  # fmt: skip
+    assert done.value.code in (0, None)
+    with np.load(next(react.glob("*.npz"))) as z:
+        assert json.loads(str(z["person_prompts"])) == [None, "bows"]
+    with pytest.raises(SystemExit) as exit_:
+        run(["react", SCENE, "--actor", actor, "--people", "2", "--person", "a",
+             "--person", "b", "--out", str(tmp_path / "r2"), "--model", str(model)])  # fmt: skip
+    err = capsys.readouterr().err
+    assert exit_.value.code == 1 and "2 --person prompts for 1 added person" in err, err
+    # umf reroll --person-prompt
+    rr = tmp_path / "rr"
+    with pytest.raises(SystemExit) as done:
+        run(["reroll", str(npz), "--person", "2", "--person-prompt", "waves", "--format", "npz",
+             "--out", str(rr), "--model", str(model)])  # fmt: skip
+    assert done.value.code in (0, None)
+    with np.load(next(rr.glob("*.npz"))) as z:
+        assert json.loads(str(z["person_prompts"])) == ["raises both hands", "waves"]
+
+
+def test_json_api_fields():
+    from umf.serve.validate import RequestError, parse_generate, parse_reroll
+
+    req = parse_generate({"prompt": SCENE, "people": 3, "person_prompts": ["bows", None, ""]})
+    assert req.person_prompts == ("bows", None, None)
+    assert parse_generate({"prompt": SCENE}).person_prompts == ()
+    for body, needle in (({"person_prompts": "bows"}, "must be a list"),
+                         ({"person_prompts": ["a", "b", "c"]}, "3 entries for 2 people"),
+                         ({"person_prompts": [1]}, "entry 1 must be a string"),
+                         ({"person_prompts": ["x" * 501]}, "longer than 500")):  # fmt: skip
+        with pytest.raises(RequestError, match=needle):
+            parse_generate({"prompt": SCENE, **body})
+    again = parse_reroll({"scene": "s1", "person": 2, "person_prompt": " bows "})
+    assert again.person_prompt == "bows"
+    with pytest.raises(RequestError, match="must be a string"):
+        parse_reroll({"scene": "s1", "person": 2, "person_prompt": 5})
