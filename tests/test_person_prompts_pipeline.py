@@ -171,3 +171,48 @@ def test_json_api_fields():
     assert again.person_prompt == "bows"
     with pytest.raises(RequestError, match="must be a string"):
         parse_reroll({"scene": "s1", "person": 2, "person_prompt": 5})
+
+
+def test_top1_is_own_prompt_nearest():
+    from umf.eval.person_matching import top1
+
+    texts = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    motion = np.array([[0.1, 0.0], [0.0, 0.9], [0.0, 0.8]])  # person 2 looks like prompt 3
+    assert top1(motion, texts) == [True, False, True]
+
+
+def test_person_items_are_scenes_of_different_actions_with_their_clips_wordings(tmp_path):
+    from conftest import prepare_fixture_corpus
+    from umf.data.corpus import Corpus
+    from umf.eval.person_matching import person_items
+    from umf.train.datasets import mirror_caption
+
+    # the fixture's test clips are walks only: its train split has other actions
+    corpus = Corpus.load(prepare_fixture_corpus(tmp_path / "c", train_scenes=40, val_scenes=2,
+                                                test_scenes=2, test_groups=2))  # fmt: skip
+    captions = {c.id: c.captions[0] for c in corpus.clips}
+    items = person_items(corpus, "train")
+    differ = [r for r in corpus.scenes["train"]
+              if len({p["content"] for p in r["people"]}) == len(r["people"])]  # fmt: skip
+    assert items and len(items) == len(differ)
+    for (caption, own), recipe in zip(items, differ, strict=True):
+        assert caption == recipe["captions"][0]
+        for p, o in zip(recipe["people"], own, strict=True):
+            want = captions[p["clip"]]
+            assert o == (mirror_caption(want) if p.get("mirrored") else want)
+    same = [r for r in corpus.scenes["train"] if len({p["content"] for p in r["people"]}) == 1]
+    assert same and len(items) == len(corpus.scenes["train"]) - len(same)
+
+
+def test_person_matching_scores_every_person_and_the_report_shows_it(pipe):
+    from test_eval_evaluator import tiny
+    from umf.eval.markdown import person_markdown
+    from umf.eval.person_matching import person_matching
+
+    ev = tiny("single")
+    items = [(SCENE, ["raises both hands", "bows"]), (SCENE, ["waves", "kicks", "calls"])]
+    out = person_matching(pipe, ev, items, seconds=1.0)
+    assert out["scenes"] == 2 and out["people"] == 5
+    assert 0.0 <= out["top1"] <= 1.0 and out["chance"] == pytest.approx((2 / 2 + 3 / 3) / 5)
+    text = person_markdown({"tiny": out})
+    assert "Per-person text matching" in text and "| tiny | 2 | 5 |" in text

@@ -222,6 +222,19 @@ def reconstruction_markdown(rec: dict[str, Any]) -> str:
     return md_table(["", *rec], rows)
 
 
+def person_markdown(section: dict[str, Any]) -> str:
+    """Per-person text matching (models with per-person prompts)."""
+    rows = [[name, str(v["scenes"]), str(v["people"]), fmt(v["top1"], v["ci95"]),
+             fmt(v["chance"])] for name, v in section.items()]  # fmt: skip
+    return "\n".join([
+        "### Per-person text matching", "",
+        "Test scenes whose people play different actions, generated with each person's own "
+        "prompt (the first wording of their clip); each person scored by the single-person "
+        "evaluator against their own prompt and the others' (`umf.eval.person_matching`).", "",
+        md_table(["model", "scenes", "people", "top-1 own prompt ↑", "chance"], rows),
+    ])  # fmt: skip
+
+
 def render_markdown(results: dict[str, Any]) -> str:
     """report.md from the collected results (the same numbers as metrics.json)."""
     meta, sources = results["meta"], [s["name"] for s in results["sources"]]
@@ -249,6 +262,8 @@ def render_markdown(results: dict[str, Any]) -> str:
     for kind, title in (("interaction", "Two people"), ("single", "Single person (P-Flow)")):
         if proto.get(kind):
             out += [protocol_markdown(proto[kind], title), ""]
+    if results.get("person_prompts"):
+        out += [person_markdown(results["person_prompts"]), ""]
     out += [
         "## 2. Relation accuracy",
         "",

@@ -374,6 +374,24 @@ def motion_section(corpus: Corpus, contenders: Sequence[Contender], plan: EvalPl
     return out
 
 
+def person_section(corpus: Corpus, contenders: Sequence[Contender], evaluator: Any,
+                   plan: EvalPlan, log: Log) -> dict[str, Any]:  # fmt: skip
+    """Per-person text matching of every model that takes per-person prompts
+    (:mod:`umf.eval.person_matching`); the quick plan scores the first 48 scenes."""
+    from umf.eval.person_matching import person_items, person_matching
+
+    models = [c for c in contenders if getattr(c.pipe, "person_prompts", False)]
+    if evaluator is None or not models:
+        return {}
+    items = person_items(corpus, plan.split)
+    items = items[:48] if plan.quick else items
+    out = {}
+    for c in models:
+        out[c.name] = person_matching(c.pipe, evaluator, items, plan.seed, log=log)
+        log(f"{c.name}: per-person matching top-1 {out[c.name]['top1']:.3f}")
+    return out
+
+
 def reconstruction_section(
     corpus: Corpus, contenders: Sequence[Contender], split: str = "test"
 ) -> dict[str, Any]:
@@ -456,6 +474,7 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
     prompt = next((s.records[0]["captions"][0] for s in sets), "two people bow to each other")
     motion = motion_section(corpus, contenders, plan, log) if plan.motion_samples else {}
     reconstruction = reconstruction_section(corpus, contenders, plan.split)
+    person = person_section(corpus, contenders, evaluators.get("single"), plan, log)
     speed = {c.name: speed_section(c, prompt, plan.speed_repeats, plan.seed) for c in contenders}
     if plan.mm_prompts and evaluators:
         notes.append(f"MModality: {plan.mm_prompts} prompts x {plan.mm_samples} samples = "
@@ -490,6 +509,7 @@ def run_eval(req: EvalRequest, log: Log = print) -> Path:
         "accumulation": table,
         "accumulation_prompts": accumulation_prompts(corpus, plan.accumulation_prompts),
         "motion": motion,
+        "person_prompts": person,
         "reconstruction": reconstruction,
         "speed": speed,
         "examples": examples,
