@@ -33,6 +33,14 @@ EXAMPLES = [
     ("crawl", "A person crawls on hands and knees.", 1, 4.0),
     ("getup", "A person lying face down gets up.", 1, 4.0),  # DeepMimic, eased to a stop
 ]
+# (file name, scene prompt, people, seconds, person prompts): `--person` for each, in order;
+# drawn only by a model with per-person prompts
+PERSON_EXAMPLES = [
+    ("facing_hands_bow", "Two people stand facing each other.", 2, 4.0,
+     ["A person raises both hands.", "Someone bows politely."]),
+    ("facing_bow_hands", "Two people stand facing each other.", 2, 4.0,
+     ["Someone bows politely.", "A person raises both hands."]),
+]  # fmt: skip
 FRAMES = 5  # evenly spaced frames per strip
 # (file name, the example re-rolled, its person, the re-roll's seed): `umf reroll`
 REROLLS = [("group_line_reroll_p2", "group_line", 2, 7)]
@@ -61,6 +69,17 @@ def main() -> None:
         path = save_still(scene.joints, args.out / f"{name}.png", frames, caption=prompt)
         print(f'{path}: umf generate "{prompt}" --people {people} --seconds {seconds:g} '
               f"--seed {args.seed} --format gif")  # fmt: skip
+    for name, prompt, people, seconds, own in PERSON_EXAMPLES if pipe.person_prompts else ():
+        scene = scenes[name] = pipe(prompt, num_people=people, seconds=seconds, seed=args.seed,
+                                    person_prompts=own)[0]  # fmt: skip
+        t = scene.num_frames
+        frames = [round(i * (t - 1) / (FRAMES - 1)) for i in range(FRAMES)]
+        said = "; ".join(f"P{k} {p.rstrip('.').lower()}" for k, p in enumerate(own, 1))
+        path = save_still(scene.joints, args.out / f"{name}.png", frames,
+                          caption=f"{prompt} ({said})")  # fmt: skip
+        flags = " ".join(f'--person "{p}"' for p in own)
+        print(f'{path}: umf generate "{prompt}" {flags} --people {people} --seconds '
+              f"{seconds:g} --seed {args.seed} --format gif")  # fmt: skip
     for name, shown, person, seed in REROLLS:
         scene = pipe.reroll(scenes[shown], person, seed=seed)
         t = scene.num_frames

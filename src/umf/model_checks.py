@@ -40,7 +40,7 @@ _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusi
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
 
 
-_FRACTIONS = {"balance_labels", "caption_mix"}  # floats in [0, 1]
+_FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop"}  # floats in [0, 1]
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:

@@ -33,6 +33,13 @@ def info(
         fmt = {}
     vocab = Vocabulary.load(path)
     typer.echo(f"model: {fmt.get('name') or path.name} ({path})")
+    try:
+        conf = json.loads((path / "config.json").read_text())
+        conf = conf.get("config", conf)
+        own = all(conf[f]["denoiser"].get("person_text", False) for f in ("pflow", "sflow"))
+    except (OSError, ValueError, KeyError, TypeError, AttributeError):
+        own = False
+    typer.echo("per-person prompts (--person): " + ("yes" if own else "no"))
     if vocab is None:
         typer.echo("this model carries no vocabulary (trained before umf 0.2, or exported "
                    "without --corpus): `umf train vocabulary` adds one")  # fmt: skip
