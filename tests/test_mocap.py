@@ -245,6 +245,27 @@ def test_placement_correction_moves_one_person(tmp_path):
     assert np.allclose(clip.joints[1, :, 0, 0] - clip.joints[0, :, 0, 0], 0.5, atol=1e-4)
 
 
+def test_a_takes_people_get_their_own_captions_and_scene_items_serve_them(tmp_path):
+    """takes.csv's caption column: what each person does in the take (per-person prompts);
+    a person without one has none."""
+    from umf.train.datasets import SceneDataset
+
+    (tmp_path / "lib").mkdir()
+    lib = _two_person_library(tmp_path / "lib")
+    (lib / "takes.csv").write_text("take,file,person,caption\nmeet,p1.bvh,1,A person leads.\n"
+                                   "meet,p2.bvh,2,\n")  # fmt: skip
+    (clip,) = list(load_mocap(lib, []))
+    assert clip.meta["person_captions"] == [["A person leads."], []]
+    (lib / "takes.csv").write_text("take,file,person\nmeet,p1.bvh,1\nmeet,p2.bvh,2\n")
+    (plain,) = list(load_mocap(lib, []))
+    assert "person_captions" not in plain.meta
+
+    ds = object.__new__(SceneDataset)  # the own-caption draw alone: a take needs no corpus
+    ds.seed, ds.epoch = 0, 0
+    assert ds._own_captions("clip", clip, 0) == ["A person leads.", ""]
+    assert ds._own_captions("clip", plain, 0) == ["", ""]
+
+
 @pytest.mark.parametrize(("lengths", "fps", "needle"),
                          [((40, 30), (30.0, 30.0), "different lengths"),
                           ((40, 40), (30.0, 60.0), "different frame rates")])  # fmt: skip

@@ -10,11 +10,13 @@
   several rows per file, ``file`` relative to DIR (or a take's name); ``label`` names the
   action (it groups clips for the split); a file without a caption is captioned from its
   name, and the report lists it;
-- ``takes.csv`` (header ``take,file,person``, optionally ``dx,dz``): files captured
-  together. Each take is one real multi-person clip in its shared world frame (its files
-  must have the same frame rate and length, and one unit is used for all of them);
+- ``takes.csv`` (header ``take,file,person``, optionally ``dx,dz`` and ``caption``): files
+  captured together. Each take is one real multi-person clip in its shared world frame (its
+  files must have the same frame rate and length, and one unit is used for all of them);
   ``dx,dz`` (metres) shift that person on the floor, a placement correction for captures
-  whose files do not quite share a frame (say so in the library's README).
+  whose files do not quite share a frame (say so in the library's README); ``caption`` is
+  what that person does in the take, their own caption for the per-person prompts ("A
+  person leads their partner in a salsa dance."; ``meta["person_captions"]``).
 
 Every clip keeps its file, the skeleton it was read as, the unit and frame rate used. Takes
 and files are split by :func:`umf.data.corpus.assign_splits` (one take is one clip, so no take
@@ -70,6 +72,8 @@ class MocapLibrary:
     captions: dict[str, list[str]] = field(default_factory=dict)
     labels: dict[str, str] = field(default_factory=dict)
     takes: dict[str, list[tuple[str, int, float, float]]] = field(default_factory=dict)
+    # take -> person (1-based) -> that person's own captions (takes.csv's caption column)
+    person_captions: dict[str, dict[int, list[str]]] = field(default_factory=dict)
     skeleton: SkeletonMap | None = None
 
 
@@ -231,7 +235,7 @@ def scan_library(root: str | Path) -> MocapLibrary:
         lib.skeleton = read_skeleton_json(root / "skeleton.json")
     if (root / "takes.csv").exists():
         path = root / "takes.csv"
-        for row in _read_csv(path, ("take", "file", "person"), ("dx", "dz")):
+        for row in _read_csv(path, ("take", "file", "person"), ("dx", "dz", "caption")):
             where = f"{path}, line {row['_line']}"
             if row["file"] not in files:
                 raise UMFError(f"{where}: no motion file {row['file']!r} in {root}")
@@ -243,6 +247,9 @@ def scan_library(root: str | Path) -> MocapLibrary:
             if not 1 <= person <= 16 or not (np.isfinite(dx) and np.isfinite(dz)):
                 raise UMFError(f"{where}: person must be 1..16 and dx/dz finite")
             lib.takes.setdefault(row["take"], []).append((row["file"], person, dx, dz))
+            if row.get("caption"):
+                own = lib.person_captions.setdefault(row["take"], {})
+                own.setdefault(person, []).append(row["caption"])
         for take, members in lib.takes.items():
             people = sorted(p for _, p, *_ in members)
             if people != list(range(1, len(people) + 1)):
@@ -349,6 +356,9 @@ def _clip(lib: MocapLibrary, key: str, members, raws: list[RawMotion], is_take: 
     }
     if is_take:
         meta["take"] = key
+        own = lib.person_captions.get(key, {})
+        if own:
+            meta["person_captions"] = [own.get(p, []) for _, p, *_ in members]
         from umf.data.relations import measured_relation
 
         meta["measured"] = measured_relation(joints)

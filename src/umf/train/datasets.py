@@ -467,10 +467,12 @@ class SceneDataset(_EpochDataset):
 
     def _own_captions(self, kind: str, item: Any, index: int) -> list[str]:
         """Each person's own caption: a wording of the clip a composed person plays
-        (mirrored with the person); "" for the people of a real take (no own captions)."""
-        if kind == "clip":
-            return [""] * item.num_people
+        (mirrored with the person); for a real take, its ``person_captions`` (takes.csv's
+        caption column), "" where it has none."""
         rng = item_rng(self.seed, self.epoch, index, stream=2)
+        if kind == "clip":
+            own = item.meta.get("person_captions") or [[]] * item.num_people
+            return [own_caption(c, rng) for c in own][: item.num_people]
         out = []
         for p in item["people"]:
             own = own_caption(self.clip_captions.get(p["clip"], []), rng)
