@@ -777,3 +777,19 @@ def test_own_caption_present_share_and_empty_clips():
     draws = [D.own_caption(["a", "b"], rng, present=0.25) for _ in range(2000)]
     assert abs(draws.count("") / 2000 - 0.75) < 0.04
     assert {"a", "b"} <= set(draws)
+
+
+def test_relation_repeats_serve_a_relations_scenes_more_often(corpus):
+    from umf.config import relation_repeats
+
+    base = D.SceneDataset(corpus, "train", None, 20, 80, real_clips=False)
+    rel = corpus.scenes["train"][0]["relation"]
+    more = D.SceneDataset(corpus, "train", None, 20, 80, real_clips=False,
+                          relation_repeats={rel: 3})  # fmt: skip
+    count = sum(r["relation"] == rel for r in corpus.scenes["train"])
+    assert len(more) == len(base) + 2 * count
+    assert sum(it[1]["relation"] == rel for it in more.items) == 3 * count
+    assert relation_repeats(["stand_facing=4"]) == {"stand_facing": 4}
+    for bad in (["stand_facing"], ["stand_facing=0"], ["stand_facing=x"]):
+        with pytest.raises(UMFError, match="relation_repeats"):
+            relation_repeats(bad)

@@ -280,6 +280,10 @@ class TrainConfig:
     # crop, beside the composed scenes: a dozen real takes among 3,000 composed scenes are
     # otherwise seen in a fraction of a percent of the batches
     real_repeats: int = 1
+    # scene batches: composed scenes of these relations appear this many times per epoch,
+    # "relation=times" (e.g. stand_facing=4: the scenes whose actions only the per-person
+    # captions name, one relation of 13 otherwise)
+    relation_repeats: tuple[str, ...] = ()
     # VAE fine-tuned with --init: refit the body-frame statistics on this corpus (balanced as
     # training draws it) and restate the VAE's weights so it computes the same function
     # (umf.models.vae.MotionVAE.restate_body): a library of motions the model never saw (a
@@ -462,6 +466,17 @@ def family_config(name: str) -> UMFConfig:
     if name == "small":
         return small_config()
     raise UMFError(f"unknown config family {name!r} (choose paper or small)")
+
+
+def relation_repeats(values: Sequence[str], where: str = "relation_repeats") -> dict[str, int]:
+    """``["stand_facing=4", ...]`` as {relation: times}; a one-line error for anything else
+    (the config check and the dataset both read the option through this)."""
+    out = {}
+    for key, value in metadata_pairs(values, where):
+        if not value.isdigit() or not 1 <= int(value) <= 1000:
+            raise UMFError(f"{where}: times must be a whole number 1-1000, got {key}={value}")
+        out[key] = int(value)
+    return out
 
 
 def metadata_pairs(values: Sequence[str], where: str = "caption_mix_from") -> list[list[str]]:

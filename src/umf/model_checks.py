@@ -65,6 +65,10 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             from umf.config import metadata_pairs
 
             metadata_pairs(value, where)
+        if name == "relation_repeats":
+            from umf.config import relation_repeats
+
+            relation_repeats(value, where)
         return
     if kind.startswith("tuple"):
         if not isinstance(value, tuple | list) or not value:

@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import math
 from collections import Counter
-from collections.abc import Hashable, Sequence
+from collections.abc import Hashable, Mapping, Sequence
 from typing import Any
 
 import numpy as np
@@ -423,9 +423,9 @@ class SceneDataset(_EpochDataset):
 
     Serves the split's composed scenes and, with ``real_clips``, its real multi-person
     clips (InterHuman, mocap takes; each ``real_repeats`` times, with a crop of its own each
-    time). Scenes with more than ``max_people`` people are left out rather
-    than truncated: their captions count everybody. ``respell``: as in
-    :class:`SingleMotionDataset`.
+    time). ``relation_repeats``: composed scenes of those relations that many times each.
+    Scenes with more than ``max_people`` people are left out rather than truncated: their
+    captions count everybody. ``respell``: as in :class:`SingleMotionDataset`.
     """
 
     def __init__(
@@ -441,10 +441,12 @@ class SceneDataset(_EpochDataset):
         real_clips: bool = True,
         respell: bool = False,
         real_repeats: int = 1,
+        relation_repeats: Mapping[str, int] | None = None,
     ) -> None:
         super().__init__(seed)
         if real_repeats < 1:
             raise UMFError(f"real_repeats must be at least 1, got {real_repeats}")
+        times = dict(relation_repeats or {})
         self.respell = respell
         _check_frames(min_frames, max_frames)
         self.corpus, self.normalizer = corpus, normalizer
@@ -454,6 +456,7 @@ class SceneDataset(_EpochDataset):
             ("scene", r, None)
             for r in corpus.scenes.get(split, [])
             if fits(r["num_people"]) and r["num_frames"] >= 2
+            for _ in range(times.get(r.get("relation", ""), 1))
         ]
         if real_clips:
             for clip in corpus.split_clips(split):

@@ -25,7 +25,7 @@ from umf.checkpoint import (
     read_weights,
     save_checkpoint,
 )
-from umf.config import TrainConfig, UMFConfig, family_config, set_option
+from umf.config import TrainConfig, UMFConfig, family_config, relation_repeats, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.io import write_json_atomic
@@ -131,7 +131,12 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                                      **common)  # fmt: skip
         else:
             ds = SceneDataset(
-                corpus, split, normalizer, real_repeats=t.real_repeats if train else 1, **common
+                corpus,
+                split,
+                normalizer,
+                real_repeats=t.real_repeats if train else 1,
+                relation_repeats=relation_repeats(t.relation_repeats) if train else None,
+                **common,
             )
         bank = None
         if vae is not None:
