@@ -8,6 +8,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import torch
 
 from conftest import MODULE, FakeText, save_tiny_model
 from umf.errors import UMFError
@@ -216,3 +217,99 @@ def test_person_matching_scores_every_person_and_the_report_shows_it(pipe):
     assert 0.0 <= out["top1"] <= 1.0 and out["chance"] == pytest.approx((2 / 2 + 3 / 3) / 5)
     text = person_markdown({"tiny": out})
     assert "Per-person text matching" in text and "| tiny | 2 | 5 |" in text
+
+
+def test_training_stages_take_each_flows_own_person():
+    """P-Flow trains on person 1's own caption, S-Flow on the reacting person's."""
+    from test_hardening import _fresh, _latent_batch, _stages
+    from umf.train.stages import own_captions
+
+    pipe = _fresh("cpu")
+    batch = _latent_batch(pipe, "cpu")
+    batch["person_captions"] = [[f"s{i}p{k}" for k in range(3)] for i in range(4)]
+    assert own_captions(batch, [0, 2, 1, 0]) == ["s0p0", "s1p2", "s2p1", "s3p0"]
+    assert own_captions({"person_captions": [[], ["x"]]}, [1, 0]) == ["", "x"]
+    assert own_captions({"captions": ["a"]}, torch.tensor([1])) == [""]
+    pstage, sstage = _stages(pipe)
+    assert pstage._inputs(batch)[3] == [f"s{i}p0" for i in range(4)]
+    for _ in range(5):  # a random reacting person each time: its own caption comes along
+        lat, prev_mask, w, _, own = sstage._inputs(batch)
+        for i in range(4):
+            k = int(prev_mask[i].sum())  # the reacting person follows the previous ones
+            assert torch.equal(w[i], lat[i, k]) and own[i] == f"s{i}p{k}"
+
+
+def test_a_latent_bank_keeps_the_own_captions():
+    from umf.train.latents import LatentBankDataset
+
+    bank = {"z": torch.zeros(2, 2, 4, 8), "people_mask": torch.ones(2, 2, dtype=torch.bool),
+            "dataset": torch.ones(2, dtype=torch.long), "captions": ["a", "b"],
+            "person_captions": [["a1", "a2"], ["b1", ""]]}  # fmt: skip
+    full, first = LatentBankDataset(bank), LatentBankDataset(bank, first_person_only=True)
+    assert full.collate([full[0], full[1]])["person_captions"] == [["a1", "a2"], ["b1", ""]]
+    assert first.collate([first[0], first[1]])["person_captions"] == [["a1"], ["b1"]]
+    del bank["person_captions"]  # a bank of a build before them: none
+    assert LatentBankDataset(bank)[0]["person_captions"] == []
+
+
+def test_a_fine_tune_grows_the_projection_and_refuses_a_flow_it_would_not_train(tmp_path):
+    from umf.checkpoint import checked_weights
+    from umf.config import UMFConfig
+    from umf.models.pflow import PFlow
+    from umf.train.run import GROWN, Launch, finetune
+
+    old = save_tiny_model(tmp_path / "old", seed=1)
+    cfg = UMFConfig.from_dict(json.loads((old / "config.json").read_text()))
+    cfg.pflow.denoiser.person_text = True
+    grown = PFlow(cfg.pflow, 4, 8, FakeText.dim)
+    weights = checked_weights(old, "pflow", grown, may_lack=GROWN)
+    assert not any("person_proj" in k for k in weights)
+    with pytest.raises(UMFError, match="missing"):
+        checked_weights(old, "pflow", grown)
+    with pytest.raises(UMFError, match="needs sflow in --stages"):
+        finetune(old, tmp_path / "corpus", tmp_path / "run",
+                 ["pflow.denoiser.person_text=true", "sflow.denoiser.person_text=true"],
+                 Launch(), stages=["pflow"], log=lambda m: None)  # fmt: skip
+
+
+def test_cli_dash_skips_a_person(model, tmp_path, fake_text):
+    from umf.cli.generate import person_list
+    from umf.cli.main import run
+
+    assert person_list(["-", "bows"]) == [None, "bows"]
+    assert person_list(["", " - "]) is None and person_list([]) is None
+    out = tmp_path / "gen"
+    with pytest.raises(SystemExit) as done:
+        run(["generate", SCENE, "--people", "2", "--seconds", "1", "--person", "-", "--person",
+             "bows", "--format", "npz", "--out", str(out), "--model", str(model)])  # fmt: skip
+    assert done.value.code in (0, None)
+    with np.load(next(out.glob("*.npz"))) as z:
+        assert json.loads(str(z["person_prompts"])) == [None, "bows"]
+
+
+def test_relation_repeats_must_name_relations():
+    from umf.config import set_option
+    from umf.model_checks import check_config_values
+
+    cfg = set_option(UMFConfig_small(), "train_sflow.relation_repeats=[stand_facing=8]")
+    check_config_values(cfg)
+    bad = set_option(UMFConfig_small(), "train_sflow.relation_repeats=[stand_facng=8]")
+    with pytest.raises(UMFError, match="no relation 'stand_facng'"):
+        check_config_values(bad)
+
+
+def UMFConfig_small():
+    from umf.config import small_config
+
+    return small_config()
+
+
+def test_a_recorded_prompt_is_left_aside_by_a_model_without_them(pipe, plain, tmp_path):
+    scene = pipe(SCENE, num_people=2, seconds=1.0, seed=3, person_prompts=[None, "bows"])[0]
+    again = plain[1].reroll(scene, 2, seed=5)  # no error: the recorded prompt is not asked
+    assert np.array_equal(again.joints[0], scene.joints[0])
+    with pytest.raises(UMFError, match="not trained with per-person prompts"):
+        plain[1].reroll(scene, 2, seed=5, person_prompt="waves")
+    new = pipe.reroll(scene, 2, seed=5, person_prompt="waves")
+    assert new.meta["person_prompts"] == [None, "waves"]
+    assert new.meta["person_coverage"] == [None, None]  # tiny models carry no vocabulary

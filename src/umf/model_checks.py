@@ -67,8 +67,12 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             metadata_pairs(value, where)
         if name == "relation_repeats":
             from umf.config import relation_repeats
+            from umf.data.scene_relations import RELATIONS
 
-            relation_repeats(value, where)
+            unknown = sorted(set(relation_repeats(value, where)) - set(RELATIONS))
+            if unknown:
+                raise UMFError(f"{where}: no relation {unknown[0]!r}; relations: "
+                               f"{', '.join(RELATIONS)}")  # fmt: skip
         return
     if kind.startswith("tuple"):
         if not isinstance(value, tuple | list) or not value:

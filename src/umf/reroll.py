@@ -86,9 +86,9 @@ def reroll_person(
     own_all += [None] * (n - len(own_all))
     if person_prompt is not None:
         own_all[k] = check_text(person_prompt, "person prompt")
-    own = own_all[k] if isinstance(own_all[k], str) else None
-    if own is not None:
-        pipe.check_person_prompts([own])
+        pipe.check_person_prompts([own_all[k]])
+    # a prompt the scene recorded is used by a model that takes them, else left aside
+    own = own_all[k] if isinstance(own_all[k], str) and pipe.person_prompts else None
     steps = req.sflow_steps or cfg.sflow.steps_for(n)
     others = [i for i in range(n) if i != k]
     joints = torch.from_numpy(np.ascontiguousarray(scene.joints, dtype=np.float32))
@@ -150,6 +150,8 @@ def reroll_person(
     meta = {**scene.meta, "rerolled": rerolls}
     if any(isinstance(p, str) for p in own_all):
         meta["person_prompts"] = own_all
+        meta["person_coverage"] = [None if not isinstance(p, str) else pipe.coverage([p])[0]
+                                   for p in own_all]  # fmt: skip
     if "shifts" in meta and len(meta["shifts"]) == n:
         meta["shifts"] = [list(s) for s in meta["shifts"]]
         meta["shifts"][k] = shift.tolist()

@@ -53,8 +53,14 @@ def parse_steps(steps: str | None) -> list[int] | None:
 
 PERSON_HELP = (
     "What person K does, beside the scene prompt: the K-th --person is person K (repeat it; "
-    "fewer than the people is fine, the others follow the scene prompt alone)."
+    "fewer than the people is fine, the others follow the scene prompt alone; '-' skips one)."
 )
+
+
+def person_list(person: list[str]) -> list[str | None] | None:
+    """``--person`` values, '-' (or an empty one) for a person left to the scene prompt."""
+    own = [None if p.strip() in ("", "-") else p for p in person]
+    return own if any(p is not None for p in own) else None
 
 
 def check_person_support(config, own) -> None:
@@ -134,7 +140,7 @@ def generate(
     wanted = parse_formats(formats)
     texts = _read_prompts(prompt, prompts)
     req = check_request(texts, people, seconds, seed, guidance, parse_steps(steps), sflow_steps,
-                        person_prompts=person or None)  # fmt: skip
+                        person_prompts=person_list(person))  # fmt: skip
     batch = check_batch(batch, len(texts))
     check_out_dir(out)
     device = check_device(device)
@@ -194,7 +200,8 @@ def react(
     ),
     model: Path | None = typer.Option(None, help="Model directory (default: bundled)."),
     person: list[str] = typer.Option([], "--person", help="What each added person does, "
-                                     "beside the prompt: the first --person is person 2."),
+                                     "beside the prompt: the first --person is person 2 "
+                                     "('-' skips one)."),
 ) -> None:  # fmt: skip
     """Your own motion as person 1; the model generates the others around it."""
     from umf.data.motion_file import FPS, open_motion
@@ -206,8 +213,9 @@ def react(
     if len(person) > req.num_people - 1:
         raise UMFError(f"{len(person)} --person prompts for {req.num_people - 1} added "
                        f"{'person' if req.num_people == 2 else 'people'}")  # fmt: skip
-    own = check_request(prompt, req.num_people, person_prompts=[None, *person]).person_prompts
-    own = own if person else ()
+    asked = person_list(person)
+    own = () if asked is None else check_request(
+        prompt, req.num_people, person_prompts=[None, *asked]).person_prompts  # fmt: skip
     batch = check_batch(batch, 1)
     start = check_float("--start", start, 0.0, 1e6)
     if seconds is not None:
@@ -242,7 +250,7 @@ def react(
         typer.echo(f"note: the actor motion is longer than {most / FPS:.1f} s; using "
                    f"{start:.1f}-{end:.1f} s (--start/--seconds choose)")  # fmt: skip
     pipe.check_person_prompts(own, acting=True)
-    warn_unknown(pipe, [prompt, *person])
+    warn_unknown(pipe, [prompt, *[p for p in own if p is not None]])
     clean_stale(out)
     for part in chunks(batch, chunk_size(req.num_people, joints.shape[0])):
         scenes = pipe([prompt] * len(part), num_people=req.num_people, seed=req.seed,

@@ -31,6 +31,7 @@ from umf.models.denoiser import (
     GuidanceArg,
     drop_text,
     evaluating,
+    expand_text,
     repeat_text,
     resolve_guidance,
 )
@@ -255,11 +256,13 @@ class PFlow(nn.Module):
         double-batch forward each in a guided stage, one plain forward in an unguided one.
         Runs in eval mode and restores the previous mode.
         """
-        text = repeat_text(text, num_samples)
-        if person_text is not None:
-            person_text = repeat_text(person_text, num_samples)
+        if person_text is not None:  # one row per prompt (or one for all), then per sample
+            rows = text.tokens.shape[0]
+            person_text = repeat_text(expand_text(person_text, rows), num_samples)
             if person_present is not None:
+                person_present = person_present.reshape(-1).expand(rows)
                 person_present = person_present.repeat_interleave(num_samples)
+        text = repeat_text(text, num_samples)
         param = next(self.parameters())
         b = text.tokens.shape[0]
         with evaluating(self):

@@ -379,11 +379,13 @@ class SingleMotionDataset(_EpochDataset):
         f, caption, mirrored = _finish(f, self.normalizer, caption, rng, self.mirror, self.respell)
         key = clip.id if clip.num_people == 1 else f"{clip.id}/p{person}"
         # own prompt: half the single-person items repeat their action in it (a stream of
-        # its own, so every other draw stays as it was); a person of a take has none
-        own = ""
+        # its own, so every other draw stays as it was); a person of a take has the take's
+        # own caption for them (takes.csv), if any
+        own, own_rng = "", item_rng(self.seed, self.epoch, index, stream=2)
         if clip.num_people == 1:
-            own = own_caption(clip.captions, item_rng(self.seed, self.epoch, index, stream=2),
-                              present=OWN_SINGLE)  # fmt: skip
+            own = own_caption(clip.captions, own_rng, present=OWN_SINGLE)
+        elif clip.meta.get("person_captions"):  # a take's person: what they do in it
+            own = own_caption(clip.meta["person_captions"][person], own_rng)
         return {
             "features": f,
             "length": length,

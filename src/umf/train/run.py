@@ -277,7 +277,8 @@ def best_or_last(stage_dir: Path) -> Path | None:
 
 
 def corpus_captions(corpus: Corpus, respell: bool = False) -> list[str]:
-    """Every caption training can ask for: clips, scenes, their mirrored forms (and with
+    """Every caption training can ask for: clips (and the own captions of a take's people),
+    scenes, their mirrored forms (and with
     ``respell`` their respelled forms: ``train_*.respell_captions``), and ''. Respelled
     forms only when asked, so a text cache built without them still serves every run
     that does not respell."""
@@ -286,6 +287,8 @@ def corpus_captions(corpus: Corpus, respell: bool = False) -> list[str]:
     texts = {""}
     for c in corpus.clips:
         texts.update(c.captions)
+        for own in c.meta.get("person_captions") or []:  # a take's people (per-person prompts)
+            texts.update(own)
     for recipes in corpus.scenes.values():
         for r in recipes:
             texts.update(r["captions"])
@@ -527,6 +530,12 @@ def finetune(
     defaults = [o for o in FINETUNE if o.split(".", 1)[0].removeprefix("train_") in stages]
     cfg = resolve_config(run_dir, None, model / "config.json" if fresh else None,
                          [*defaults, *overrides] if fresh else list(overrides))  # fmt: skip
+    base = UMFConfig.from_dict(json.loads((model / "config.json").read_text()))
+    for flow in ("pflow", "sflow"):
+        want, had = (getattr(c, flow).denoiser.person_text for c in (cfg, base))
+        if want and not had and flow not in stages:
+            raise UMFError(f"{flow}.denoiser.person_text=true needs {flow} in --stages: the "
+                           f"{flow} of {model} has no per-person prompts to keep")  # fmt: skip
     own_vae = "vae" in stages
     for stage in STAGES:
         if stage not in stages:
