@@ -4,8 +4,9 @@ The bundled model was made in steps across several sessions (a VAE and both flow
 GPU, then fine-tunes on a CPU; each step has a results page). This runs the same steps
 in order, with the options those pages and the shipped ``config.json`` record, into
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
-(the last five stages, ``teach``, ``reteach``, ``rebalance``, ``settle`` and ``pace``, need
-the full corpus of ``make corpus`` with ``../shared``: Bandai and the CMU and DeepMimic mocap):
+(the last seven training stages, ``teach``, ``reteach``, ``rebalance``, ``settle``, ``pace``,
+``person`` and ``person2``, need the full corpus of ``make corpus`` with ``../shared``: Bandai
+and the CMU and DeepMimic mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -15,12 +16,13 @@ Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again
 the finished stages and resumes the training it was in (``umf train --resume``). The
 first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice) wants a
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
-after it take about 2.5 h here (1.8 h of them the S-Flow; ``settle`` 20 min, the last,
-``pace``, 18 min). ``pace`` was trained on a corpus of the current composer (partners of
-side-by-side scenes at the leader's pace and in step; but for its fallback, changed since,
-24 of 3,000 training scenes); the stages before it on the composer of their day, whose
-side-by-side partners were paired at random: a corpus prepared now gives every stage the
-new scenes.
+after it take about 3.6 h here (1.8 h of them the S-Flow; ``settle`` 20 min, ``pace``
+18 min, and for the per-person prompts ``person`` 40 min and ``person2`` 26 min). ``pace``
+was trained on a corpus of the composer of its day (partners of side-by-side scenes at the
+leader's pace and in step; but for its fallback, changed since, 24 of 3,000 training
+scenes), ``person`` and ``person2`` on the current one (with ``stand_facing`` and the own
+captions); the stages before on the composer of their day, whose side-by-side partners were
+paired at random: a corpus prepared now gives every stage the new scenes.
 ``--dry-run`` prints the commands and runs nothing.
 
 Not bit-for-bit: the GPU stages ran with TF32 and the code changed between the steps, so
@@ -44,7 +46,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261204"
+NAME = "umf-small-bandai-20261204b"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -121,6 +123,20 @@ SETTLE = sets("train_pflow", max_steps=1600, real_repeats=60, balance_labels=0.5
 # results/umf-small-bandai-20261204: the S-Flow alone, on a corpus whose side-by-side
 # partners walk at the leader's pace and in step (the composer of that release)
 PACE = sets("train_sflow", max_steps=2000, real_repeats=60, val_every=400, ckpt_every=100)
+
+
+# results/umf-small-bandai-20261204b: both flows take per-person prompts (a projection grown
+# at zero), fine-tuned on a corpus with the stand_facing relation and own captions; round 2
+# serves the stand_facing scenes 8 times per epoch
+PERSON = ["--set", "pflow.denoiser.person_text=true", "--set", "sflow.denoiser.person_text=true",
+          *sets("train_pflow", max_steps=1200, lr=0.0002, real_repeats=60, val_every=300,
+                ckpt_every=50),
+          *sets("train_sflow", max_steps=1500, lr=0.0002, real_repeats=60, val_every=300,
+                ckpt_every=100)]  # fmt: skip
+PERSON2 = [*sets("train_pflow", max_steps=800, lr=0.0002, real_repeats=60,
+                 relation_repeats=["stand_facing=8"], val_every=400, ckpt_every=50),
+           *sets("train_sflow", max_steps=1500, lr=0.0003, real_repeats=60,
+                 relation_repeats=["stand_facing=8"], val_every=500, ckpt_every=100)]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -202,7 +218,7 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
         run = work / "runs" / name
         resume = ["--resume"] if run.exists() else []
         return Stage(name, [[*umf, "train", "finetune", "--from", str(start), *c, "--out",
-                             str(run), "--stages", flow, *options, *cut(flow),
+                             str(run), "--stages", flow, *options, *cut(*flow.split(",")),
                              *resume]], {})  # fmt: skip
 
     rebalance = work / "runs" / "rebalance"
@@ -212,7 +228,14 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     pace = work / "runs" / "pace"
     out.append(one_flow("pace", settle / "model", "sflow", PACE))
     # results/step-budget-val-20261203: 5 + 5 P-Flow steps score like 45 + 5, 2.4x faster
-    out.append(variant("name", pace / "model", work / "model", "--set", "pflow.steps=[5,5]",
+    m["steps"] = work / "models" / "steps"
+    out.append(variant("steps", pace / "model", m["steps"], "--set", "pflow.steps=[5,5]"))
+    out.append(one_flow("person", m["steps"], "pflow,sflow", PERSON))
+    person = work / "runs" / "person"
+    out.append(one_flow("person2", person / "model", "pflow,sflow", PERSON2))
+    # results/umf-small-bandai-20261204b: own prompts guided at 3 apart from the scene's 2
+    out.append(variant("name", work / "runs" / "person2" / "model", work / "model", "--set",
+                       "pflow.person_guidance=3.0", "--set", "sflow.person_guidance=3.0",
                        "--name", NAME))  # fmt: skip
     return out
 

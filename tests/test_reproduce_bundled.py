@@ -42,6 +42,9 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "rebalance",
         "settle",
         "pace",
+        "steps",
+        "person",
+        "person2",
         "name",
     ]
     cfg = family_config("small")
@@ -80,7 +83,8 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert stages["sampling"][0][2:4] == [str(models / "gpu"), str(models / "sampling")]
     # the model_variant stages, which refuse an existing destination, replace one left by a kill
     writes = {st.name: st.writes for st in rb.stages(tmp_path, Path("out/corpus")) if st.writes}
-    assert writes == {"sampling": models / "sampling", "name": tmp_path / "model"}
+    assert writes == {"sampling": models / "sampling", "steps": models / "steps",
+                      "name": tmp_path / "model"}  # fmt: skip
     teach = stages["teach"][0]
     assert teach[teach.index("--from") + 1] == str(models / "mix")
     run = tmp_path / "runs" / "teach"
@@ -106,7 +110,15 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert pace[pace.index("--stages") + 1] == "sflow"
     paced = tmp_path / "runs" / "pace"
     assert pace[pace.index("--out") + 1] == str(paced)
-    assert stages["name"][0][2:4] == [str(paced / "model"), str(tmp_path / "model")]
+    assert stages["steps"][0][2:4] == [str(paced / "model"), str(models / "steps")]
+    person = stages["person"][0]
+    assert person[person.index("--from") + 1] == str(models / "steps")
+    assert person[person.index("--stages") + 1] == "pflow,sflow"
+    person2 = stages["person2"][0]
+    assert person2[person2.index("--from") + 1] == str(tmp_path / "runs" / "person" / "model")
+    assert "train_sflow.relation_repeats=[stand_facing=8]" in _sets(person2)
+    final = tmp_path / "runs" / "person2" / "model"
+    assert stages["name"][0][2:4] == [str(final), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
 
@@ -148,8 +160,8 @@ def test_stages_the_final_config_overwrites_keep_their_documented_options(tmp_pa
     # --max-steps cuts every training stage last, so the cut wins
     cut = {st.name: st.commands for st in _script().stages(tmp_path, Path("out/corpus"), 3)}
     trained = {"gpu": ("vae", "pflow", "sflow"), "hg": ("pflow",), "dec": ("vae",),
-               "mix": ("pflow",), **{n: ("sflow",) for n in ("rn0.5", "rn0.5b", "rn0.25c",
-                                                            "rn0.125d")}}  # fmt: skip
+               "mix": ("pflow",), "person": ("pflow", "sflow"), "person2": ("pflow", "sflow"),
+               **{n: ("sflow",) for n in ("rn0.5", "rn0.5b", "rn0.25c", "rn0.125d")}}  # fmt: skip
     for name, what in trained.items():
         last = {o.split("=")[0]: o.split("=")[1] for o in _sets(cut[name][0])}  # last one wins
         for stage in what:
@@ -165,7 +177,8 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     )  # fmt: skip
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
-                     "mix", "teach", "reteach", "rebalance", "settle", "pace", "name"]  # fmt: skip
+                     "mix", "teach", "reteach", "rebalance", "settle", "pace", "steps", "person",
+                     "person2", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",

@@ -139,6 +139,9 @@ class PFlowConfig:
     p_uncond: float = 0.1
     # chance a training item's own prompt is dropped (with the scene's, always, at p_uncond)
     p_person_drop: float = 0.3
+    # CFG scale of an own prompt, apart from the scene prompt's (None: the same scale):
+    # v_u + guidance * (v_scene - v_u) + person_guidance * (v_both - v_scene)
+    person_guidance: float | None = None
     # loss scale of the single-person corpus (the authors': 0.1 for HumanML3D's size); the
     # small family uses 1: on Bandai the actions and gestures are in the single clips
     single_person_weight: float = 0.1
@@ -165,6 +168,7 @@ class SFlowConfig:
     guidance: float = 3.0
     p_uncond: float = 0.1
     p_person_drop: float = 0.3  # as PFlowConfig.p_person_drop
+    person_guidance: float | None = None  # as PFlowConfig.person_guidance
     lambda_recon: float = 1.0  # 0 = no reconstruction loss (ablation)
     reaction_only: bool = False  # noise-free reaction path (ablation)
     context_noise: float = 0.0  # perturb real context latents to look generated

@@ -163,3 +163,37 @@ def classifier_free_guidance(
         return guidance_combine(v_c, v_u, scale)
 
     return guided
+
+
+def composed_guidance(
+    velocity: Velocity,
+    scale: float,
+    own_scale: float,
+    both: Mapping[str, Any],
+    scene: Mapping[str, Any],
+    uncond: Mapping[str, Any],
+) -> Velocity:
+    """Guidance over two prompts, each with its own scale (compositional CFG):
+    v_u + scale * (v_scene - v_u) + own_scale * (v_both - v_scene), where ``scene`` is the
+    scene prompt alone and ``both`` adds each person's own prompt. One forward over the
+    tripled batch [both; scene; uncond]; with ``own_scale == scale`` it is plain CFG of
+    ``both`` against ``uncond``, so the own prompt's pull is set apart from the scene's."""
+    if not set(both) == set(scene) == set(uncond):
+        raise ValueError("both, scene and uncond must have the same keys")
+
+    def guided(x: Tensor, t: Tensor, **shared: Any) -> Tensor:
+        b = x.shape[0]
+        three = {k: _stack_pair(_stack_pair(both[k], scene[k], k), uncond[k], k) for k in both}
+        dup = {k: _triple(v, b) for k, v in shared.items()}
+        out = velocity(torch.cat([x, x, x], 0), torch.cat([t, t, t], 0), **dup, **three)
+        v_both, v_scene, v_u = out[:b], out[b : 2 * b], out[2 * b :]
+        return v_u + scale * (v_scene - v_u) + own_scale * (v_both - v_scene)
+
+    return guided
+
+
+def _triple(value: Any, batch: int) -> Any:
+    """Repeat a per-sample tensor for the tripled batch; leave anything else alone."""
+    if isinstance(value, Tensor) and value.dim() > 0 and value.shape[0] == batch:
+        return torch.cat([value, value, value], dim=0)
+    return value

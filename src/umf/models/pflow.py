@@ -18,6 +18,7 @@ from umf.flows import (
     Method,
     PyramidConfig,
     classifier_free_guidance,
+    composed_guidance,
     default_steps,
     flow_matching_loss,
     initial_noise,
@@ -107,16 +108,26 @@ def _stage_field(
     scales: Sequence[float | None],
     cond: dict[str, Any],
     uncond: dict[str, Any],
+    scene: dict[str, Any] | None = None,
+    own_scale: float | None = None,
 ) -> Callable[..., Tensor]:
     """The velocity field the pyramid sampler integrates, guided per stage by ``scales``
-    (coarse -> fine; stage K is the coarsest, stage 1 the finest)."""
+    (coarse -> fine; stage K is the coarsest, stage 1 the finest). ``scene``: the scene
+    prompt alone, when ``cond`` adds an own prompt: then each guided stage guides the own
+    prompt by ``own_scale`` (None: the stage's scale) apart from the scene's
+    (:func:`umf.flows.composed_guidance`)."""
 
     def plain(x: Tensor, t: Tensor, **shared: Any) -> Tensor:
         return net(x, t, **shared, **cond)
 
+    def guided(s: float) -> Callable[..., Tensor]:
+        if scene is None:
+            return classifier_free_guidance(net, s, cond, uncond)
+        return composed_guidance(net, s, s if own_scale is None else own_scale, cond, scene,
+                                 uncond)  # fmt: skip
+
     fields: dict[float | None, Callable[..., Tensor]] = {
-        s: plain if s is None else classifier_free_guidance(net, s, cond, uncond)
-        for s in set(scales)
+        s: plain if s is None else guided(s) for s in set(scales)
     }
     k = len(scales)
     if len(fields) == 1:
@@ -247,8 +258,9 @@ class PFlow(nn.Module):
         scale, and the NFE.
 
         ``person_text`` (B rows) / ``person_present`` (B,): person 1's own prompt (a model
-        with per-person prompts); guidance is over both prompts (the unconditional side has
-        neither).
+        with per-person prompts); a guided stage then guides the scene prompt by its scale
+        and the own prompt by ``person_guidance`` (None: the same), one forward over three
+        batches (:func:`umf.flows.composed_guidance`); the unconditional side has neither.
 
         Defaults come from the config (per stage: :func:`stage_scales`); ``guidance`` None
         or 1.0 disables CFG, and ``uncond_text`` is needed only when some stage is guided.
@@ -279,7 +291,10 @@ class PFlow(nn.Module):
                 if uncond_text.tokens.shape[0] not in (1, b):
                     uncond_text = repeat_text(uncond_text, num_samples)
                 uncond = {**cond, "text": encode_uncond(self.net, uncond_text, b)}
-            field = _stage_field(self.net, scales, cond, uncond)
+            scene = None  # an own prompt is guided apart from the scene's
+            if person_text is not None and uncond:
+                scene = {**cond, "text": self.net.encode_text(text)}
+            field = _stage_field(self.net, scales, cond, uncond, scene, self.cfg.person_guidance)
             k = self.pyramid.num_stages
             noise = initial_noise(
                 self.pyramid,

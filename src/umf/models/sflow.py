@@ -20,6 +20,7 @@ from umf.config import SFlowConfig
 from umf.flows import (
     Method,
     classifier_free_guidance,
+    composed_guidance,
     sample_semi_noise,
     semi_noise_loss,
     semi_noise_training_sample,
@@ -185,10 +186,11 @@ class SFlow(nn.Module):
     ) -> tuple[Tensor, int]:
         """The next person's latent (B, p, r) and the NFE, integrating the ODE once.
 
-        Defaults come from the config; ``guidance`` None or 1.0 disables CFG (over both
-        prompts: the unconditional side has neither). ``person_text`` / ``person_present``:
-        the new person's own prompt. NFE counts guided-field evaluations (``steps * evals
-        per solver step``). Runs in eval mode.
+        Defaults come from the config; ``guidance`` None or 1.0 disables CFG (the
+        unconditional side has neither prompt). ``person_text`` / ``person_present``: the
+        new person's own prompt, guided by ``person_guidance`` (None: the scene's scale)
+        apart from the scene prompt (:func:`umf.flows.composed_guidance`). NFE counts
+        guided-field evaluations (``steps * evals per solver step``). Runs in eval mode.
         """
         b = text.tokens.shape[0]
         scale = resolve_guidance(guidance, self.cfg.guidance)
@@ -200,7 +202,12 @@ class SFlow(nn.Module):
                 if uncond_text is None:
                     raise ValueError("classifier-free guidance needs uncond_text")
                 uncond = {"text": encode_uncond(self.net, uncond_text, b)}
-                field = classifier_free_guidance(self.velocity, scale, cond, uncond)
+                if person_text is None:
+                    field = classifier_free_guidance(self.velocity, scale, cond, uncond)
+                else:  # the own prompt guided apart from the scene's
+                    own = scale if self.cfg.person_guidance is None else self.cfg.person_guidance
+                    scene = {"text": self.net.encode_text(text)}
+                    field = composed_guidance(self.velocity, scale, own, cond, scene, uncond)
                 cond = {}
             w, nfe = sample_semi_noise(
                 field,
