@@ -37,7 +37,7 @@ LAYERS: list[tuple[str, list[str]]] = [
     ("data", ["umf.data"]),
     ("models", ["umf.models", "umf.checkpoint", "umf.model_checks"]),
     ("pipeline (Algorithm 1)", ["umf.pipeline", "umf.separation", "umf.anchoring",
-                                "umf.coverage", "umf.reroll"]),
+                                "umf.coverage", "umf.reroll", "umf.person_prompts"]),
     ("evaluation", ["umf.eval"]),
     ("training", ["umf.train"]),
     ("applications", ["umf", "umf.__main__", "umf.serve", "umf.cli"]),

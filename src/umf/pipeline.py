@@ -33,6 +33,7 @@ from umf.model_checks import (
     check_weight_shapes,
 )
 from umf.models.denoiser import FROM_CONFIG
+from umf.person_prompts import person_meta, person_text
 from umf.representation import (
     CONTACT,
     Normalizer,
@@ -197,14 +198,6 @@ class UMFPipeline:
         if acting and own[0] is not None:
             raise UMFError("person 1 is the given motion: person prompts start with person 2")
 
-    def _person_text(self, req: Request, k: int, batch: int) -> dict[str, Any]:
-        """Person ``k``'s (0-based) own prompt for a flow's sampler, or nothing."""
-        own = req.person_prompts[k] if k < len(req.person_prompts) else None
-        if own is None:
-            return {}
-        words = respell_prompt(own, self.config.text.respell)
-        return {"person_text": self.text_encoder.encode([words] * batch).to(self.device)}
-
     def to(self, device: str | torch.device) -> UMFPipeline:
         self.device = torch.device(device)
         for m in (self.vae, self.pflow, self.sflow):
@@ -285,14 +278,7 @@ class UMFPipeline:
             frames = actor.shape[0] - 1
         seed = fresh_seed() if req.seed is None else req.seed
         covered = dict(zip(req.prompts, self.coverage(req.prompts), strict=True))
-        own = list(req.person_prompts) + [None] * (req.num_people - len(req.person_prompts))
-        own_meta: dict[str, Any] = {}
-        if any(p is not None for p in own):
-            scored = self.coverage([p for p in own if p is not None])
-            own_meta = {
-                "person_prompts": own,
-                "person_coverage": [None if p is None else scored.pop(0) for p in own],
-            }
+        own_meta = person_meta(self, req.person_prompts, req.num_people)
         scenes: list[Scene] = []
         for part in chunks(len(req.prompts), chunk_size(req.num_people, frames)):
             texts = [req.prompts[i] for i in part]
@@ -344,7 +330,7 @@ class UMFPipeline:
                 steps=req.pflow_steps or self.config.pflow.steps,
                 guidance=FROM_CONFIG if guidance is None else guidance,  # per stage
                 generator=gen,
-                **self._person_text(req, 0, b),
+                **person_text(self, req.person_prompts, 0, b),
             )
             latents, nfe = [z1], nfe + n
         reencode = self.config.sflow.reencode_context and num_people > 1
@@ -366,7 +352,7 @@ class UMFPipeline:
                 steps=req.sflow_steps or self.config.sflow.steps_for(num_people),
                 guidance=self.config.sflow.guidance if guidance is None else guidance,
                 generator=gen,
-                **self._person_text(req, k, b),
+                **person_text(self, req.person_prompts, k, b),
             )
             latents.append(w)
             nfe += n

@@ -50,6 +50,28 @@ def swap_words(text: str, table: dict[str, str], pattern: re.Pattern | None = No
     return (pattern or word_pattern(table)).sub(swap, text)
 
 
+# Side words and their mirror images: a caption of mirrored motion swaps them
+_SIDE_WORDS = {
+    "left": "right",
+    "right": "left",
+    "leftward": "rightward",
+    "rightward": "leftward",
+    "leftwards": "rightwards",
+    "rightwards": "leftwards",
+    "clockwise": "counterclockwise",
+    "counterclockwise": "clockwise",
+    "counter-clockwise": "clockwise",
+    "anticlockwise": "clockwise",
+    "anti-clockwise": "clockwise",
+}
+_SIDE_RE = word_pattern(_SIDE_WORDS)
+
+
+def mirror_caption(text: str) -> str:
+    """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
+    return swap_words(text, _SIDE_WORDS, _SIDE_RE)
+
+
 _WORD = re.compile(r"[a-z][a-z'-]*")
 
 

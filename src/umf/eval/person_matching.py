@@ -17,7 +17,7 @@ import numpy as np
 import torch
 
 from umf.data.corpus import Corpus
-from umf.train.datasets import mirror_caption
+from umf.text import mirror_caption
 
 Log = Callable[[str], None]
 

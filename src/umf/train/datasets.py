@@ -44,7 +44,7 @@ from umf.representation import (
     mirror_features,
     place_features,
 )
-from umf.text import swap_words, word_pattern
+from umf.text import mirror_caption, swap_words, word_pattern
 from umf.train.batching import collate_scenes, collate_single
 from umf.train.extension import SETTLE, extend_person, extension_period
 
@@ -55,19 +55,6 @@ OWN_SINGLE = 0.5
 PLACEMENT_RADIUS = 3.0  # metres: people of a scene stand within a few metres of each other
 SINGLE_PERSON, MULTI_PERSON = 0, 1  # the dataset token of P-Flow
 
-_SIDE_WORDS = {
-    "left": "right",
-    "right": "left",
-    "leftward": "rightward",
-    "rightward": "leftward",
-    "leftwards": "rightwards",
-    "rightwards": "leftwards",
-    "clockwise": "counterclockwise",
-    "counterclockwise": "clockwise",
-    "counter-clockwise": "clockwise",
-    "anticlockwise": "clockwise",
-    "anti-clockwise": "clockwise",
-}
 # Spellings the captions use one way and people write the other: the corpus says "walks
 # backwards", a user types "walks backward", and the flows condition on token states, so
 # the unseen spelling alone cost walking backward three quarters of its speed
@@ -76,16 +63,10 @@ _SPELLINGS = {"backwards": "backward", "forwards": "forward", "towards": "toward
 _SPELLINGS |= {v: k for k, v in _SPELLINGS.items()}
 
 
-_SIDE_RE = word_pattern(_SIDE_WORDS)
 _SPELL_RE = word_pattern(_SPELLINGS)
 
 
 # --------------------------------------------------------------------- pure functions
-def mirror_caption(text: str) -> str:
-    """Swap side words (left/right, clockwise/counterclockwise) to match mirrored motion."""
-    return swap_words(text, _SIDE_WORDS, _SIDE_RE)
-
-
 def respell_caption(text: str) -> str:
     """The other spelling of direction words: backwards <-> backward, forwards <-> forward,
     towards <-> toward (same meaning; training on both makes either prompt work)."""
