@@ -97,6 +97,9 @@ def test_three_coloured_figures_on_the_canvas(browsed):
         counts = [hue_pixels(canvas, c) for c in PALETTE[:3]]
         assert min(counts) > MIN_FIGURE_PIXELS, (name, counts)
     assert result["history"] and "Three people walk side by side." in result["history"][0]
+    # one box per person; the filled one reached the model as person 2's own prompt
+    assert result["person_boxes"] == 3
+    assert result["person_prompts"] == [None, "Someone bows politely.", None]
 
 
 def test_the_scrubber_moves_the_figures(browsed):

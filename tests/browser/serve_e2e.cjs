@@ -1,6 +1,6 @@
 // Drives the `umf serve` page in headless Debian Chromium with playwright-core, as a user
-// would: prompt, 3 people, Generate, wait for the scene, scrub, download the GLB, re-roll
-// person 2. Writes what it saw under OUT (PNG snapshots, the GLB, result.json); tests/test_serve_browser.py
+// would: prompt, 3 people, person 2 told to bow, Generate, wait for the scene, scrub,
+// download the GLB, re-roll person 2. Writes what it saw under OUT (PNG snapshots, the GLB, result.json); tests/test_serve_browser.py
 // checks the pixels and files. Usage: node serve_e2e.cjs URL OUT
 const fs = require("fs");
 const os = require("os");
@@ -49,10 +49,15 @@ async function main() {
     await page.fill("#prompt", "Three people walk side by side.");
     await page.fill("#people", "3");
     await page.fill("#seed", "0");
+    // what each person does: one box per person, person 2 told to bow
+    await page.click("#each summary");
+    result.person_boxes = await page.$$eval("#person-prompts input", (els) => els.length);
+    await page.fill("#person-2", "Someone bows politely.");
     const clicked = Date.now();
     await page.click("#generate");
     await page.waitForSelector("body[data-scene]", { timeout: 600000 });
     result.click_to_scene_s = (Date.now() - clicked) / 1000;
+    result.person_prompts = await page.evaluate(() => window.umfPage.state.scene.person_prompts);
     result.page_click_to_scene_s = await page.evaluate(() => document.body.dataset.clickToScene);
 
     await page.click("#play"); // pause: the snapshots below are of chosen frames
