@@ -24,14 +24,6 @@ from pathlib import Path
 SCENE = "Two people stand facing each other."
 HANDS, BOW = "A person raises both hands.", "Someone bows politely."
 HEAD_DROP = 0.08  # metres
-# the stand_facing relation's captions (umf.data.scene_relations): the scenes whose actions
-# only the person prompts name
-STAND_FACING = {
-    "Two people stand facing each other.",
-    "Two people face each other.",
-    "Two people stand opposite each other.",
-    "Two people meet face to face.",
-}
 
 
 def gestures(pipe, seeds: int) -> dict:
@@ -71,8 +63,13 @@ def matching(pipe, corpus_dir: Path) -> dict:
 
     corpus = Corpus.load(corpus_dir)
     ev = load_evaluator(default_evaluator_dir() / "single", cache_dir=corpus.root / "text-cache")
+    from umf.data.scene_relations import RELATIONS
+
+    # the stand_facing relation's captions, as the composer writes them (capitalised)
+    words = RELATIONS["stand_facing"].captions(None, [], 2, {})
+    stand_facing = {c[0].upper() + c[1:] for c in words}
     items = person_items(corpus, "test")
-    facing = [it for it in items if it[0] in STAND_FACING]
+    facing = [it for it in items if it[0] in stand_facing]
     return {"all": person_matching(pipe, ev, items),
             "stand_facing": person_matching(pipe, ev, facing)}  # fmt: skip
 

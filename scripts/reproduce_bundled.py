@@ -17,7 +17,7 @@ the finished stages and resumes the training it was in (``umf train --resume``).
 first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice) wants a
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
 after it take about 3.6 h here (1.8 h of them the S-Flow; ``settle`` 20 min, ``pace``
-18 min, and for the per-person prompts ``person`` 40 min and ``person2`` 26 min). ``pace``
+18 min, and for the per-person prompts ``person`` 41 min and ``person2`` 23 min). ``pace``
 was trained on a corpus of the composer of its day (partners of side-by-side scenes at the
 leader's pace and in step; but for its fallback, changed since, 24 of 3,000 training
 scenes), ``person`` and ``person2`` on the current one (with ``stand_facing`` and the own

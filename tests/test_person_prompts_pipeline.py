@@ -288,20 +288,14 @@ def test_cli_dash_skips_a_person(model, tmp_path, fake_text):
 
 
 def test_relation_repeats_must_name_relations():
-    from umf.config import set_option
+    from umf.config import set_option, small_config
     from umf.model_checks import check_config_values
 
-    cfg = set_option(UMFConfig_small(), "train_sflow.relation_repeats=[stand_facing=8]")
+    cfg = set_option(small_config(), "train_sflow.relation_repeats=[stand_facing=8]")
     check_config_values(cfg)
-    bad = set_option(UMFConfig_small(), "train_sflow.relation_repeats=[stand_facng=8]")
+    bad = set_option(small_config(), "train_sflow.relation_repeats=[stand_facng=8]")
     with pytest.raises(UMFError, match="no relation 'stand_facng'"):
         check_config_values(bad)
-
-
-def UMFConfig_small():
-    from umf.config import small_config
-
-    return small_config()
 
 
 def test_a_recorded_prompt_is_left_aside_by_a_model_without_them(pipe, plain, tmp_path):

@@ -33,7 +33,12 @@ from umf.model_checks import (
     check_weight_shapes,
 )
 from umf.models.denoiser import FROM_CONFIG
-from umf.person_prompts import person_meta, person_text
+from umf.person_prompts import (
+    check_person_prompts,
+    person_meta,
+    person_text,
+    takes_person_prompts,
+)
 from umf.representation import (
     CONTACT,
     Normalizer,
@@ -185,18 +190,11 @@ class UMFPipeline:
     @property
     def person_prompts(self) -> bool:
         """Whether the model takes a prompt per person (both flows trained with them)."""
-        return all(m.net.person_proj is not None for m in (self.pflow, self.sflow))
+        return takes_person_prompts(self.config)
 
     def check_person_prompts(self, own: Sequence[str | None], acting: bool = False) -> None:
-        """A one-line error when per-person prompts are asked of a model without them, or
-        for person 1 of a reaction (that person is the user's motion)."""
-        if not any(p is not None for p in own):
-            return
-        if not self.person_prompts:
-            raise UMFError(f"the model {self.name} was not trained with per-person prompts: "
-                           "describe everyone in the scene prompt")  # fmt: skip
-        if acting and own[0] is not None:
-            raise UMFError("person 1 is the given motion: person prompts start with person 2")
+        """:func:`umf.person_prompts.check_person_prompts` for this model."""
+        check_person_prompts(self.config, own, acting, f"the model {self.name}")
 
     def to(self, device: str | torch.device) -> UMFPipeline:
         self.device = torch.device(device)

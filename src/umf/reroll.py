@@ -20,6 +20,7 @@ import torch
 from umf.anchoring import anchor_people
 from umf.errors import UMFError
 from umf.kinematics import Bodies, fit_bodies
+from umf.person_prompts import person_text
 from umf.representation import (
     CONTACT,
     assemble_features,
@@ -103,10 +104,7 @@ def reroll_person(
         words = respell_prompt(text, cfg.text.respell)
         cond = pipe.text_encoder.encode([words]).to(device)
         uncond = pipe.text_encoder.encode([""]).to(device)
-        person_kw = {}
-        if own is not None:
-            own_words = respell_prompt(own, cfg.text.respell)
-            person_kw["person_text"] = pipe.text_encoder.encode([own_words]).to(device)
+        person_kw = person_text(pipe, [own], 0, 1)
         w, _ = pipe.sflow.sample(context, mask, cond, uncond, steps=steps,
                                  guidance=cfg.sflow.guidance if guidance is None else guidance,
                                  generator=scene_generators(seed, [0], device),

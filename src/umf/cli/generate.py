@@ -10,6 +10,7 @@ import typer
 from umf.cli.loading import load_pipeline, peek_config
 from umf.errors import UMFError
 from umf.exports import FORMATS, check_formats
+from umf.person_prompts import check_person_prompts
 from umf.validation import (
     MAX_SECONDS,
     MIN_SECONDS,
@@ -61,15 +62,6 @@ def person_list(person: list[str]) -> list[str | None] | None:
     """``--person`` values, '-' (or an empty one) for a person left to the scene prompt."""
     own = [None if p.strip() in ("", "-") else p for p in person]
     return own if any(p is not None for p in own) else None
-
-
-def check_person_support(config, own) -> None:
-    """Before the model loads: per-person prompts need a model trained with them."""
-    if config is None or not any(p is not None for p in own):
-        return
-    if not (config.pflow.denoiser.person_text and config.sflow.denoiser.person_text):
-        raise UMFError("this model was not trained with per-person prompts (--person): "
-                       "describe everyone in the scene prompt")  # fmt: skip
 
 
 def warn_unknown(pipe, prompts: list[str]) -> None:
@@ -155,10 +147,10 @@ def generate(
     config = peek_config(model)
     if config is not None:
         check_for_model(req, config)
-    check_person_support(config, req.person_prompts)
+    if config is not None:
+        check_person_prompts(config, req.person_prompts)
     pipe = load_pipeline(model).to(device)
     frames = check_for_model(req, pipe.config)
-    pipe.check_person_prompts(req.person_prompts)
     warn_unknown(pipe, texts + [p for p in req.person_prompts if p is not None])
     clean_stale(out)
     shown = []
@@ -227,7 +219,8 @@ def react(
     ]
     check_targets([p for stem in stems for p in scene_targets(stem, wanted, req.num_people)])
     config = peek_config(model)
-    check_person_support(config, own)
+    if config is not None:
+        check_person_prompts(config, own, acting=True)
     most = (config.vae.max_frames if config is not None else 300) + 1
     count = most if seconds is None else round(seconds * FPS) + 1
     first = round(start * FPS)
@@ -249,7 +242,6 @@ def react(
         end = start + most / FPS
         typer.echo(f"note: the actor motion is longer than {most / FPS:.1f} s; using "
                    f"{start:.1f}-{end:.1f} s (--start/--seconds choose)")  # fmt: skip
-    pipe.check_person_prompts(own, acting=True)
     warn_unknown(pipe, [prompt, *[p for p in own if p is not None]])
     clean_stale(out)
     for part in chunks(batch, chunk_size(req.num_people, joints.shape[0])):
@@ -304,7 +296,8 @@ def reroll(
     if not text.strip():
         raise UMFError(f"{scene_file}: has no prompt; give one with --prompt")
     config = peek_config(model)
-    check_person_support(config, [person_prompt])
+    if config is not None:
+        check_person_prompts(config, [person_prompt])
     most = (config.vae.max_frames if config is not None else 300) + 1
     if motion.frames > most:
         raise UMFError(f"{scene_file}: {motion.frames / FPS:.1f} s; the model re-rolls scenes of "

@@ -17,7 +17,9 @@ def info(
                                      "(repeatable): known or not, and its nearest captions."),
 ) -> None:  # fmt: skip
     """List the model's actions, styles and multi-person relations; score prompts."""
+    from umf.cli.loading import peek_config
     from umf.coverage import Vocabulary
+    from umf.person_prompts import takes_person_prompts
     from umf.pipeline import default_model_dir
 
     path = model if model is not None else default_model_dir()
@@ -33,12 +35,8 @@ def info(
         fmt = {}
     vocab = Vocabulary.load(path)
     typer.echo(f"model: {fmt.get('name') or path.name} ({path})")
-    try:
-        conf = json.loads((path / "config.json").read_text())
-        conf = conf.get("config", conf)
-        own = all(conf[f]["denoiser"].get("person_text", False) for f in ("pflow", "sflow"))
-    except (OSError, ValueError, KeyError, TypeError, AttributeError):
-        own = False
+    config = peek_config(path)
+    own = config is not None and takes_person_prompts(config)
     typer.echo("per-person prompts (--person): " + ("yes" if own else "no"))
     if vocab is None:
         typer.echo("this model carries no vocabulary (trained before umf 0.2, or exported "

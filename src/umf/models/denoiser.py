@@ -104,6 +104,30 @@ def drop_text(text: TextFeatures, uncond_text: TextFeatures, drop: Tensor) -> Te
     )
 
 
+def training_text(
+    net: FlowTransformer,
+    p_person_drop: float,
+    text: TextFeatures,
+    uncond_text: TextFeatures,
+    drop: Tensor,
+    person_text: TextFeatures | None = None,
+    person_present: Tensor | None = None,
+    generator: torch.Generator | None = None,
+) -> TextFeatures | Tensor:
+    """A training batch's text: rows in ``drop`` (CFG) get the empty prompt and no own
+    prompt; for a model with per-person prompts, the others keep their own prompt (where
+    ``person_present``) unless dropped at ``p_person_drop``. That draw happens only for
+    such a model, so other models see the random stream they always did."""
+    scene = drop_text(text, uncond_text, drop)
+    if person_text is None or net.person_proj is None:
+        return scene
+    d = drop.to(dtype=torch.bool)
+    keep = ~d & ~(torch.rand(d.shape[0], generator=generator, device=d.device) < p_person_drop)
+    if person_present is not None:
+        keep = keep & person_present.to(keep.device, torch.bool)
+    return net.encode_text(scene, person_text, keep)
+
+
 # ----------------------------------------------------------------------- building blocks
 def timestep_embedding(t: Tensor, dim: int, max_period: float = 10_000.0) -> Tensor:
     """Sinusoidal features of t in [0, 1] (scaled by 1000 so the frequencies resolve it)."""
@@ -262,41 +286,26 @@ class FlowTransformer(nn.Module):
     ) -> Tensor:
         """(B, d) text token; constant along an ODE, so samplers compute it once.
 
-        ``person``: each row's own prompt (per-person prompts), added through the same text
-        head and ``person_proj``; ``person_present`` (B,) bool zeroes the rows without one.
+        ``person``: each row's own prompt (per-person prompts), added as
+        :meth:`person_token`.
         """
         cond = self.text_head(text.tokens, text.mask)
         if person is None:
             return cond
+        return cond + self.person_token(person, cond.shape[0], person_present)
+
+    def person_token(
+        self, person: TextFeatures, batch: int, person_present: Tensor | None = None
+    ) -> Tensor:
+        """(B, d) own-prompt part of the text token: the own prompt through the same text
+        head and ``person_proj``; ``person_present`` (B,) bool zeroes the rows without one."""
         if self.person_proj is None:
             raise ValueError("this model was not trained with per-person prompts")
-        person = expand_text(person, cond.shape[0])
+        person = expand_text(person, batch)
         own = self.person_proj(self.text_head(person.tokens, person.mask))
         if person_present is not None:
             own = own * person_present.to(device=own.device, dtype=own.dtype)[:, None]
-        return cond + own
-
-    def training_text(
-        self,
-        text: TextFeatures,
-        uncond_text: TextFeatures,
-        drop: Tensor,
-        person: TextFeatures | None = None,
-        person_present: Tensor | None = None,
-        person_drop: Tensor | None = None,
-    ) -> Tensor:
-        """The text token of a training batch: rows in ``drop`` (CFG) get the empty prompt
-        and no own prompt; the others keep theirs unless in ``person_drop``. A model
-        without per-person prompts ignores ``person``."""
-        scene = drop_text(text, uncond_text, drop)
-        if person is None or self.person_proj is None:
-            return self.encode_text(scene)
-        keep = ~drop.to(device=scene.mask.device, dtype=torch.bool)
-        if person_present is not None:
-            keep = keep & person_present.to(keep.device, torch.bool)
-        if person_drop is not None:
-            keep = keep & ~person_drop.to(keep.device, torch.bool)
-        return self.encode_text(scene, person, keep)
+        return own
 
     # ------------------------------------------------------------------ forward
     def forward(

@@ -30,11 +30,11 @@ from umf.models.denoiser import (
     FROM_CONFIG,
     FlowTransformer,
     GuidanceArg,
-    drop_text,
     evaluating,
     expand_text,
     repeat_text,
     resolve_guidance,
+    training_text,
 )
 from umf.models.latent_normalizer import LatentNormalizer
 from umf.text import Pooling, TextFeatures
@@ -65,25 +65,6 @@ def encode_uncond(net: FlowTransformer, uncond_text: TextFeatures, batch: int) -
     if u.shape[0] != 1:
         raise ValueError(f"uncond_text has {u.shape[0]} rows; expected 1 or {batch}")
     return u.expand(batch, -1)
-
-
-def conditioning(
-    net: FlowTransformer,
-    p_person_drop: float,
-    text: TextFeatures,
-    uncond_text: TextFeatures,
-    drop: Tensor,
-    person_text: TextFeatures | None,
-    person_present: Tensor | None,
-    generator: torch.Generator | None,
-) -> TextFeatures | Tensor:
-    """A training batch's text: the scene prompt dropped at ``drop`` (CFG) and, for a model
-    with per-person prompts, each row's own prompt dropped at ``p_person_drop`` too (the
-    draw only happens then, so other models see the random stream they always did)."""
-    if person_text is None or net.person_proj is None:
-        return drop_text(text, uncond_text, drop)
-    person_drop = torch.rand(drop.shape[0], generator=generator, device=drop.device) < p_person_drop
-    return net.training_text(text, uncond_text, drop, person_text, person_present, person_drop)
 
 
 def stage_scales(cfg: PFlowConfig, guidance: GuidanceArg = FROM_CONFIG) -> tuple[float | None, ...]:
@@ -208,8 +189,8 @@ class PFlow(nn.Module):
         z1 = self.latent_norm.normalize(z1)
         sample = pyramid_training_sample(z1, self.pyramid, generator=generator)
         drop = torch.rand(b, generator=generator, device=z1.device) < self.cfg.p_uncond
-        cond = conditioning(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
-                            person_text, person_present, generator)  # fmt: skip
+        cond = training_text(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
+                             person_text, person_present, generator)  # fmt: skip
         pred = self.net(
             sample.x,
             sample.t,
@@ -278,7 +259,10 @@ class PFlow(nn.Module):
         param = next(self.parameters())
         b = text.tokens.shape[0]
         with evaluating(self):
-            cond: dict[str, Any] = {"text": self.net.encode_text(text, person_text, person_present)}
+            scene_token = self.net.encode_text(text)
+            cond: dict[str, Any] = {"text": scene_token}
+            if person_text is not None:
+                cond["text"] = scene_token + self.net.person_token(person_text, b, person_present)
             if self.net.num_datasets > 0:
                 ds = torch.as_tensor(dataset, dtype=torch.long, device=param.device)
                 ds = ds.expand(b) if ds.dim() == 0 else ds.repeat_interleave(num_samples)
@@ -293,7 +277,7 @@ class PFlow(nn.Module):
                 uncond = {**cond, "text": encode_uncond(self.net, uncond_text, b)}
             scene = None  # an own prompt is guided apart from the scene's
             if person_text is not None and uncond:
-                scene = {**cond, "text": self.net.encode_text(text)}
+                scene = {**cond, "text": scene_token}
             field = _stage_field(self.net, scales, cond, uncond, scene, self.cfg.person_guidance)
             k = self.pyramid.num_stages
             noise = initial_noise(

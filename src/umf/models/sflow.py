@@ -33,9 +33,10 @@ from umf.models.denoiser import (
     GuidanceArg,
     evaluating,
     resolve_guidance,
+    training_text,
 )
 from umf.models.latent_normalizer import LatentNormalizer
-from umf.models.pflow import conditioning, encode_uncond
+from umf.models.pflow import encode_uncond
 from umf.text import Pooling, TextFeatures
 
 MULTI_PERSON = 1  # dataset index a shared P-Flow backbone is run with
@@ -154,8 +155,8 @@ class SFlow(nn.Module):
         )  # fmt: skip
         b = w.shape[0]
         drop = torch.rand(b, generator=generator, device=w.device) < self.cfg.p_uncond
-        cond = conditioning(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
-                            person_text, person_present, generator)  # fmt: skip
+        cond = training_text(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
+                             person_text, person_present, generator)  # fmt: skip
         pred = self.velocity(sample.x, sample.t, cond)
         parts = semi_noise_loss(
             pred,
@@ -196,7 +197,10 @@ class SFlow(nn.Module):
         scale = resolve_guidance(guidance, self.cfg.guidance)
         with evaluating(self):
             context = self.context(self.latent_norm.normalize(prev), prev_mask)
-            cond: dict[str, Any] = {"text": self.net.encode_text(text, person_text, person_present)}
+            scene_token = self.net.encode_text(text)
+            cond: dict[str, Any] = {"text": scene_token}
+            if person_text is not None:
+                cond["text"] = scene_token + self.net.person_token(person_text, b, person_present)
             field: Callable[..., Tensor] = self.velocity
             if scale is not None:
                 if uncond_text is None:
@@ -206,8 +210,8 @@ class SFlow(nn.Module):
                     field = classifier_free_guidance(self.velocity, scale, cond, uncond)
                 else:  # the own prompt guided apart from the scene's
                     own = scale if self.cfg.person_guidance is None else self.cfg.person_guidance
-                    scene = {"text": self.net.encode_text(text)}
-                    field = composed_guidance(self.velocity, scale, own, cond, scene, uncond)
+                    field = composed_guidance(self.velocity, scale, own, cond,
+                                              {"text": scene_token}, uncond)  # fmt: skip
                 cond = {}
             w, nfe = sample_semi_noise(
                 field,
