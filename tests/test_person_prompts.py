@@ -29,7 +29,8 @@ def pflow(person: bool, **kw: Any) -> PFlow:
 
 def sflow(person: bool, **kw: Any) -> SFlow:
     torch.manual_seed(0)
-    cfg = SFlowConfig(denoiser=tiny_denoiser(person_text=person), steps=3, **kw)
+    kw.setdefault("denoiser", tiny_denoiser(person_text=person))
+    cfg = SFlowConfig(steps=3, **kw)
     return SFlow(cfg, P, R, D_TEXT)
 
 
@@ -201,3 +202,38 @@ def test_person_guidance_strengthens_only_the_own_prompt():
         again, _ = model.sample(text, empty, generator=g())
         assert torch.equal(again, base)
     assert pulls[0] < pulls[1]
+
+
+def test_an_own_head_reads_the_own_prompt_apart_from_the_scene_head() -> None:
+    """With ``person_head`` the own token comes through a head of its own: the scene head's
+    weights no longer reach it, the own head's do; without own prompts it is not built."""
+    model = sflow(True, denoiser=tiny_denoiser(person_text=True, person_head=True))
+    net = model.net
+    randomise_projection(model)
+    own = make_text(2, seed=5)
+    before = net.person_token(own, 2)
+    with torch.no_grad():
+        for p in net.text_head.parameters():
+            p.add_(0.5)
+    assert torch.equal(net.person_token(own, 2), before)
+    with torch.no_grad():
+        for p in net.person_head.parameters():
+            p.add_(0.5)
+    assert not torch.allclose(net.person_token(own, 2), before)
+    with pytest.raises(ValueError, match="person_head needs denoiser.person_text"):
+        sflow(False, denoiser=tiny_denoiser(person_head=True))
+
+
+def test_a_new_own_head_restarts_the_projection_after_it() -> None:
+    """A fine-tune that adds the own head takes it and the projection as built (zero, so
+    the own prompt starts with no effect); one that adds own prompts takes the projection."""
+    from umf.train.run import grown_keys
+
+    plain, person = sflow(False).state_dict(), sflow(True).state_dict()
+    headed = sflow(True, denoiser=tiny_denoiser(person_text=True, person_head=True))
+    keys = grown_keys(headed.state_dict(), person)
+    assert {k for k in keys if "person_head" not in k} == {
+        "net.person_proj.weight", "net.person_proj.bias"}  # fmt: skip
+    assert {k for k in headed.state_dict() if ".person_head." in k} <= set(keys)
+    assert sorted(grown_keys(person, plain)) == ["net.person_proj.bias", "net.person_proj.weight"]
+    assert grown_keys(person, person) == []

@@ -256,13 +256,13 @@ def test_a_fine_tune_grows_the_projection_and_refuses_a_flow_it_would_not_train(
     from umf.checkpoint import checked_weights
     from umf.config import UMFConfig
     from umf.models.pflow import PFlow
-    from umf.train.run import GROWN, Launch, finetune
+    from umf.train.run import Launch, finetune, grows
 
     old = save_tiny_model(tmp_path / "old", seed=1)
     cfg = UMFConfig.from_dict(json.loads((old / "config.json").read_text()))
     cfg.pflow.denoiser.person_text = True
     grown = PFlow(cfg.pflow, 4, 8, FakeText.dim)
-    weights = checked_weights(old, "pflow", grown, may_lack=GROWN)
+    weights = checked_weights(old, "pflow", grown, may_lack=grows)
     assert not any("person_proj" in k for k in weights)
     with pytest.raises(UMFError, match="missing"):
         checked_weights(old, "pflow", grown)

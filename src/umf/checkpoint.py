@@ -347,16 +347,15 @@ def checked_weights(
     module: nn.Module,
     *,
     strict: bool = True,
-    may_lack: str | tuple[str, ...] = "",
+    may_lack: Callable[[str], bool] | None = None,
 ) -> dict[str, torch.Tensor]:
     """``<name>.safetensors`` checked against ``module``'s keys and shapes, ready to load.
 
-    Keys ending in ``may_lack`` (a suffix or several, when given) may be missing even when
-    ``strict``.
+    Keys for which ``may_lack(key)`` holds may be missing even when ``strict``.
     """
     sd = read_weights(path, name)
     own = module.state_dict()
-    missing = [k for k in own if k not in sd and not (may_lack and k.endswith(may_lack))]
+    missing = [k for k in own if k not in sd and not (may_lack and may_lack(k))]
     unexpected = [k for k in sd if k not in own]
     if strict and (missing or unexpected):
         what = "missing" if missing else "unexpected"

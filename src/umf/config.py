@@ -110,6 +110,11 @@ class DenoiserConfig:
     # text head and a zero-initialised projection, is added to the scene's (a model
     # fine-tuned with it starts as the model it came from)
     person_text: bool = False
+    # read own prompts through a text head of their own (same shape as the scene's) instead
+    # of the scene's: the S-Flow's scene captions never name a gesture, so its head gives
+    # "raises both hands", "raises the right hand" and "... the left hand" one token (cosine
+    # 0.86-0.95) and person 2 could not be told which (results/umf-small-bandai-20261205)
+    person_head: bool = False
 
 
 @dataclass

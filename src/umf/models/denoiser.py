@@ -238,16 +238,13 @@ class FlowTransformer(nn.Module):
         self.time_mlp = nn.Sequential(nn.Linear(d, d), nn.SiLU(), nn.Linear(d, d))
         self.stage_emb = nn.Embedding(num_stages, d) if num_stages > 1 else None
         self.dataset_emb = nn.Embedding(num_datasets, d) if num_datasets > 0 else None
-        self.text_head = TextHead(
-            text_dim,
-            d,
-            width=cfg.text_width,
-            heads=cfg.text_heads,
-            ff_dim=cfg.text_ff_dim,
-            layers=cfg.text_layers,
-            pool=text_pool,
-            dropout=cfg.dropout,
-        )
+
+        def text_head() -> TextHead:
+            return TextHead(text_dim, d, width=cfg.text_width, heads=cfg.text_heads,
+                            ff_dim=cfg.text_ff_dim, layers=cfg.text_layers, pool=text_pool,
+                            dropout=cfg.dropout)  # fmt: skip
+
+        self.text_head = text_head()
         self.backbone = SkipTransformer(d, cfg.num_layers, cfg.num_heads, cfg.ff_dim, cfg.dropout)
         branch_layers = cfg.branch_layers if num_datasets > 0 else 0
         self.heads = nn.ModuleList(
@@ -256,7 +253,10 @@ class FlowTransformer(nn.Module):
         )
         self.prefix = 2 + (num_datasets > 0)
         # per-person prompts: zero at first, so a model fine-tuned with them starts as it was
+        if cfg.person_head and not cfg.person_text:
+            raise ValueError("denoiser.person_head needs denoiser.person_text")
         self.person_proj = nn.Linear(d, d) if cfg.person_text else None
+        self.person_head = text_head() if cfg.person_head else None
         if self.person_proj is not None:
             nn.init.zeros_(self.person_proj.weight)
             nn.init.zeros_(self.person_proj.bias)
@@ -297,12 +297,14 @@ class FlowTransformer(nn.Module):
     def person_token(
         self, person: TextFeatures, batch: int, person_present: Tensor | None = None
     ) -> Tensor:
-        """(B, d) own-prompt part of the text token: the own prompt through the same text
-        head and ``person_proj``; ``person_present`` (B,) bool zeroes the rows without one."""
+        """(B, d) own-prompt part of the text token: the own prompt through the text head
+        (its own with ``person_head``, else the scene's) and ``person_proj``;
+        ``person_present`` (B,) bool zeroes the rows without one."""
         if self.person_proj is None:
             raise ValueError("this model was not trained with per-person prompts")
         person = expand_text(person, batch)
-        own = self.person_proj(self.text_head(person.tokens, person.mask))
+        head = self.text_head if self.person_head is None else self.person_head
+        own = self.person_proj(head(person.tokens, person.mask))
         if person_present is not None:
             own = own * person_present.to(device=own.device, dtype=own.dtype)[:, None]
         return own

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -415,11 +415,11 @@ def train_stage(
 
         module = st.trainable()
         own = module.state_dict()
-        weights = checked_weights(init, stage, module, may_lack=GROWN)
+        weights = checked_weights(init, stage, module, may_lack=grows)
         # a model without detail gains (trained before pflow.detail_norm) keeps the ones
         # just fitted, refitted under its own latent mean and std; one without per-person
         # prompts gets the zero projection (it computes what it did before)
-        grown = [k for k in own if k.endswith(GROWN) and k not in weights]
+        grown = grown_keys(own, weights)
         weights.update({k: own[k] for k in grown})
         module.load_state_dict({k: v.to(own[k].dtype) for k, v in weights.items()})
         fresh = [k for k in grown if k.endswith("detail_gain")]
@@ -480,8 +480,26 @@ def export_model(
     )  # fmt: skip
 
 
-# Weights a fine-tune may add to the model it starts from: new ones start as built
+# Weights a fine-tune may add to the model it starts from: new ones start as built. A new
+# own-prompt head (``denoiser.person_head``) also restarts the projection after it, which
+# was trained on the scene head's output: the fine-tune starts as the model it came from.
 GROWN = ("detail_gain", "person_proj.weight", "person_proj.bias")
+
+
+def grows(key: str) -> bool:
+    """Whether a fine-tune may add weight ``key`` to a model that lacks it."""
+    return key.endswith(GROWN) or ".person_head." in key
+
+
+def grown_keys(own: Mapping[str, Any], loaded: Mapping[str, Any]) -> list[str]:
+    """The keys of ``own`` (the module as built) a fine-tune takes as built rather than from
+    the ``loaded`` weights: the ones the model lacks and, beside a new own-prompt head, the
+    projection after it (trained on the scene head's output, it would read the new head's
+    as noise; restarted at zero, the own prompt starts with no effect)."""
+    grown = [k for k in own if grows(k) and k not in loaded]
+    if any(".person_head." in k for k in grown):
+        grown += [k for k in own if k.endswith(GROWN[1:]) and k not in grown]
+    return grown
 
 
 # Fine-tuning a released model on a new corpus (`umf train finetune`): what each stage changes
@@ -532,10 +550,11 @@ def finetune(
                          [*defaults, *overrides] if fresh else list(overrides))  # fmt: skip
     base = UMFConfig.from_dict(json.loads((model / "config.json").read_text()))
     for flow in ("pflow", "sflow"):
-        want, had = (getattr(c, flow).denoiser.person_text for c in (cfg, base))
-        if want and not had and flow not in stages:
-            raise UMFError(f"{flow}.denoiser.person_text=true needs {flow} in --stages: the "
-                           f"{flow} of {model} has no per-person prompts to keep")  # fmt: skip
+        for option in ("person_text", "person_head"):  # weights a flow must be trained to have
+            want, had = (getattr(getattr(c, flow).denoiser, option) for c in (cfg, base))
+            if want and not had and flow not in stages:
+                raise UMFError(f"{flow}.denoiser.{option}=true needs {flow} in --stages: the "
+                               f"{flow} of {model} has no such weights to keep")  # fmt: skip
     own_vae = "vae" in stages
     for stage in STAGES:
         if stage not in stages:
