@@ -151,7 +151,7 @@ EQUIVALENT: dict[tuple[str, str], str] = {
     ("umf.flows.pyramid.x_sample_pyramid",
      "stage = torch.full((x.shape[0],), w.stage, device=x.device)"):
         "torch.full infers int64 (torch.long) from the Python int w.stage",
-    ("umf.flows.solvers.x__duplicate", "return torch.cat([value, value], )"):
+    ("umf.flows.solvers.x__repeat", "return torch.cat([value] * times, )"):
         "dim 0 is torch.cat's default",
     ("umf.flows.solvers.x__stack_pair", "return torch.cat([a, b], )"):
         "dim 0 is torch.cat's default",

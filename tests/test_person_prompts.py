@@ -220,7 +220,7 @@ def test_an_own_head_reads_the_own_prompt_apart_from_the_scene_head() -> None:
         for p in net.person_head.parameters():
             p.add_(0.5)
     assert not torch.allclose(net.person_token(own, 2), before)
-    with pytest.raises(ValueError, match="person_head needs denoiser.person_text"):
+    with pytest.raises(ValueError, match=r"person_head needs denoiser\.person_text"):
         sflow(False, denoiser=tiny_denoiser(person_head=True))
 
 

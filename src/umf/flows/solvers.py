@@ -124,10 +124,11 @@ def _stack_pair(a: Any, b: Any, key: str) -> Any:
     raise ValueError(f"cond/uncond entry {key!r} differs but is not a tensor; cannot batch")
 
 
-def _duplicate(value: Any, batch: int) -> Any:
-    """Repeat a per-sample tensor for the doubled batch; leave anything else alone."""
+def _repeat(value: Any, batch: int, times: int = 2) -> Any:
+    """Repeat a per-sample tensor for a batch guidance stacks ``times`` times over; leave
+    anything else alone."""
     if isinstance(value, Tensor) and value.dim() > 0 and value.shape[0] == batch:
-        return torch.cat([value, value], dim=0)
+        return torch.cat([value] * times, dim=0)
     return value
 
 
@@ -157,7 +158,7 @@ def classifier_free_guidance(
             return guidance_combine(v_c, v_u, scale)
         b = x.shape[0]
         both = {k: _stack_pair(cond[k], uncond[k], k) for k in cond}
-        dup = {k: _duplicate(v, b) for k, v in shared.items()}
+        dup = {k: _repeat(v, b) for k, v in shared.items()}
         out = velocity(torch.cat([x, x], 0), torch.cat([t, t], 0), **dup, **both)
         v_c, v_u = out[:b], out[b:]
         return guidance_combine(v_c, v_u, scale)
@@ -184,16 +185,9 @@ def composed_guidance(
     def guided(x: Tensor, t: Tensor, **shared: Any) -> Tensor:
         b = x.shape[0]
         three = {k: _stack_pair(_stack_pair(both[k], scene[k], k), uncond[k], k) for k in both}
-        dup = {k: _triple(v, b) for k, v in shared.items()}
+        dup = {k: _repeat(v, b, 3) for k, v in shared.items()}
         out = velocity(torch.cat([x, x, x], 0), torch.cat([t, t, t], 0), **dup, **three)
         v_both, v_scene, v_u = out[:b], out[b : 2 * b], out[2 * b :]
         return v_u + scale * (v_scene - v_u) + own_scale * (v_both - v_scene)
 
     return guided
-
-
-def _triple(value: Any, batch: int) -> Any:
-    """Repeat a per-sample tensor for the tripled batch; leave anything else alone."""
-    if isinstance(value, Tensor) and value.dim() > 0 and value.shape[0] == batch:
-        return torch.cat([value, value, value], dim=0)
-    return value
