@@ -298,6 +298,11 @@ class TrainConfig:
     # (umf.models.vae.MotionVAE.restate_body): a library of motions the model never saw (a
     # crawl, a backflip) is then a few deviations from the mean instead of tens
     refit_body: bool = False
+    # S-Flow only: weight of the loss on the decoded reaction's feet (m/frame they slide
+    # where the real reaction's are planted; umf.train.foot_slide), on flow times from
+    # foot_loss_min_t. 0 = off (the paper's loss alone)
+    foot_loss: float = 0.0
+    foot_loss_min_t: float = 0.5
 
 
 @dataclass

@@ -36,6 +36,7 @@ from umf.flows.pyramid import (
 from umf.flows.semi_noise import (
     SemiNoiseLoss,
     SemiNoiseSample,
+    reaction_endpoint,
     sample_semi_noise,
     semi_noise_initial_state,
     semi_noise_loss,
@@ -86,6 +87,7 @@ __all__ = [
     "linear_path_sample",
     "max_correlation",
     "pyramid_training_sample",
+    "reaction_endpoint",
     "sample_pyramid",
     "sample_semi_noise",
     "sample_time",

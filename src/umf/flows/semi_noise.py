@@ -122,6 +122,16 @@ def semi_noise_training_sample(
                             reaction_start=start)  # fmt: skip
 
 
+def reaction_endpoint(x: Tensor, pred: Tensor, t: Tensor, *, reaction_only: bool = False) -> Tensor:
+    """The reaction the predicted velocity points at, x_t + (1 - t) v, from the joint state
+    x and prediction pred (B, p, 2r) (or (B, p, r) reaction-only) at t (B,): the straight
+    path's end, exact when pred is the target velocity (what a loss on the decoded
+    reaction reads)."""
+    if not reaction_only:
+        x, pred = split_halves(x)[1], split_halves(pred)[1]
+    return x + (1.0 - t.to(x.dtype))[:, None, None] * pred
+
+
 def semi_noise_loss(
     pred: Tensor,
     target: Tensor,

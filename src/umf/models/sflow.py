@@ -21,6 +21,7 @@ from umf.flows import (
     Method,
     classifier_free_guidance,
     composed_guidance,
+    reaction_endpoint,
     sample_semi_noise,
     semi_noise_loss,
     semi_noise_training_sample,
@@ -134,11 +135,15 @@ class SFlow(nn.Module):
         generator: torch.Generator | None = None,
         person_text: TextFeatures | None = None,
         person_present: Tensor | None = None,
+        endpoint: bool = False,
     ) -> dict[str, Tensor]:
         """Semi-noise loss for reactions ``w`` (B, p, r) to real previous latents.
 
         ``person_text`` / ``person_present``: the reacting person's own prompt where it has
         one (a model with ``denoiser.person_text``; dropped at ``p_person_drop``).
+        ``endpoint``: also return the reaction the prediction points at (``endpoint``,
+        (B, p, r) latents, with gradient; :func:`umf.flows.reaction_endpoint`) and the
+        times ``t`` (B,): for a loss on the decoded reaction (``train_sflow.foot_loss``).
 
         ``prev`` (B, n_prev, p, r) with ``prev_mask`` (B, n_prev) (True = that person
         exists). ``total`` = reaction + lambda_recon * recon (backpropagate it); the two
@@ -164,11 +169,16 @@ class SFlow(nn.Module):
             lambda_recon=self.cfg.lambda_recon,
             reaction_only=self.cfg.reaction_only,
         )
-        return {
+        out = {
             "total": parts.total,
             "reaction": parts.reaction.detach(),
             "recon": parts.recon.detach(),
         }
+        if endpoint:
+            end = reaction_endpoint(sample.x, pred, sample.t, reaction_only=self.cfg.reaction_only)
+            out["endpoint"] = self.latent_norm.denormalize(end)
+            out["t"] = sample.t.detach()
+        return out
 
     @torch.no_grad()
     def sample(

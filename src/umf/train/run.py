@@ -399,7 +399,7 @@ def train_stage(
                 pflow = PFlow(cfg.pflow, p, r, cache.encoder.dim)
                 _load_frozen(run_dir / "pflow", "pflow", pflow, log)
                 backbone = pflow.net
-            st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed)
+            st = SFlowStage(cfg, vae, cache, backbone=backbone, seed=t.seed, normalizer=normalizer)
     # only a config that built its stage is saved: a failed start never poisons the run
     run_dir.mkdir(parents=True, exist_ok=True)
     cfg.save_yaml(run_dir / "config.yaml")

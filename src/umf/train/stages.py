@@ -21,6 +21,7 @@ from umf.models.sflow import SFlow
 from umf.models.vae import MotionVAE, vae_losses
 from umf.representation import POS, Normalizer
 from umf.text import TextFeatureCache, TextFeatures
+from umf.train.foot_slide import decoded_foot_slide
 
 
 def _is_scene(batch: dict[str, Any]) -> bool:
@@ -208,11 +209,15 @@ class PFlowStage(_LatentStage):
 class SFlowStage(_LatentStage):
     name = "sflow"
 
-    def __init__(self, config, vae, text, sflow: SFlow | None = None, backbone=None, seed: int = 0):
+    def __init__(self, config, vae, text, sflow: SFlow | None = None, backbone=None, seed: int = 0,
+                 normalizer: Normalizer | None = None):  # fmt: skip
         super().__init__(config, vae, text)
         p, r = vae.latent_shape
         self.sflow = sflow or SFlow(config.sflow, p, r, text.encoder.dim, backbone=backbone)
         self.generator = DeviceGenerator(seed)
+        self.normalizer = normalizer  # the corpus's: the foot loss decodes to metres
+        if config.train_sflow.foot_loss > 0 and normalizer is None:
+            raise ValueError("train_sflow.foot_loss needs the corpus normaliser")
 
     def modules(self) -> dict[str, nn.Module]:
         return {"sflow": self.sflow, "vae": self.vae}
@@ -245,7 +250,20 @@ class SFlowStage(_LatentStage):
         text, uncond = self.encode_text(captions, w.device)
         gen = self.generator.on(w.device)
         person = self.person_text(self.sflow.net, own, w.device)
-        return self.sflow(prev, prev_mask, w, text, uncond, generator=gen, **person)
+        feet = self.config.train_sflow.foot_loss > 0
+        out = self.sflow(prev, prev_mask, w, text, uncond, generator=gen, endpoint=feet, **person)
+        return self._with_feet(out, w)
+
+    def _with_feet(self, out: dict[str, Tensor], w: Tensor) -> dict[str, Tensor]:
+        """``total`` plus the weighted foot loss (logged as ``foot``), where it is on."""
+        if "endpoint" not in out:
+            return out
+        t_cfg = self.config.train_sflow
+        w_hat, t = out.pop("endpoint"), out.pop("t")
+        slide = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t, t_cfg.foot_loss_min_t)
+        out["total"] = out["total"] + t_cfg.foot_loss * slide
+        out["foot"] = slide.detach()
+        return out
 
     @torch.no_grad()
     def validation_step(self, batch: dict[str, Any]) -> dict[str, float]:
@@ -253,5 +271,7 @@ class SFlowStage(_LatentStage):
         text, uncond = self.encode_text(captions, w.device)
         gen = DeviceGenerator(1234).on(w.device)
         person = self.person_text(self.sflow.net, own, w.device)
-        losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen, **person)
-        return {k: float(v) for k, v in losses.items()}
+        feet = self.config.train_sflow.foot_loss > 0
+        losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen,
+                                 endpoint=feet, **person)  # fmt: skip
+        return {k: float(v) for k, v in self._with_feet(losses, w).items()}

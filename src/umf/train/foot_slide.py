@@ -1,0 +1,54 @@
+"""A loss on the decoded reaction's feet (``train_sflow.foot_loss``): where the real
+reaction's feet are planted, the reaction the S-Flow points at may not slide them faster.
+
+Why: the S-Flow's walking followers glide, their feet carried along at 0.76 m/s against the
+leader's 0.14 (results/umf-small-bandai-20261204), and the clean-up then delivers what the
+legs do: 0.7x the leader's pace. In latent MSE a glide and a stride along the same path cost
+alike, so the flow's own loss cannot tell them apart; the frozen decoder can.
+"""
+
+from __future__ import annotations
+
+import torch
+import torch.nn.functional as F
+from torch import Tensor, nn
+
+from umf.models.vae import foot_contact_loss
+from umf.representation import Normalizer, features_to_joints, foot_contacts
+
+FOOT_ROWS = 32  # rows of a batch decoded for the loss: the decoder's cost stays bounded
+FOOT_FRAMES = 90  # frames each is decoded to (3 s at 30 fps)
+
+
+def decoded_foot_slide(
+    vae: nn.Module,
+    normalizer: Normalizer,
+    w: Tensor,
+    w_hat: Tensor,
+    t: Tensor,
+    min_t: float = 0.5,
+    rows: int = FOOT_ROWS,
+    frames: int = FOOT_FRAMES,
+) -> Tensor:
+    """Mean excess speed (m/frame) of ``w_hat``'s decoded feet over ``w``'s where ``w``'s
+    decoded feet are planted (:func:`umf.models.vae.foot_contact_loss`).
+
+    ``w`` / ``w_hat`` (B, p, r): the real reactions and the ones the flow points at, in
+    latent units; ``t`` (B,): their flow times. Only rows at ``t >= min_t`` count (up to
+    ``rows`` of them): early on the flow points at a blur of every reaction the context
+    allows, whose feet slide whatever the flow does. Both are decoded to ``frames`` frames,
+    so the real reaction's contacts and the estimate's are read alike. Gradients reach
+    ``w_hat`` only (the decoder is frozen by its caller). Zero when no row qualifies.
+    """
+    keep = torch.nonzero(t >= min_t).squeeze(1)[:rows]
+    if keep.numel() == 0:
+        return w_hat.sum() * 0.0
+    mask = torch.ones(keep.numel(), frames, dtype=torch.bool, device=w.device)
+
+    def joints(z: Tensor) -> Tensor:
+        return features_to_joints(normalizer.denormalize(vae.decode(z, mask)))
+
+    with torch.no_grad():
+        ref = joints(w[keep])
+        planted = F.pad(foot_contacts(ref), (0, 0, 0, 1))  # (B, T, 4): a pair per frame
+    return foot_contact_loss(joints(w_hat[keep]), ref, planted, mask)
