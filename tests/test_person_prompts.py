@@ -227,7 +227,7 @@ def test_an_own_head_reads_the_own_prompt_apart_from_the_scene_head() -> None:
 def test_a_new_own_head_restarts_the_projection_after_it() -> None:
     """A fine-tune that adds the own head takes it and the projection as built (zero, so
     the own prompt starts with no effect); one that adds own prompts takes the projection."""
-    from umf.train.run import grown_keys
+    from umf.train.run import grown_keys, grown_names
 
     plain, person = sflow(False).state_dict(), sflow(True).state_dict()
     headed = sflow(True, denoiser=tiny_denoiser(person_text=True, person_head=True))
@@ -237,3 +237,6 @@ def test_a_new_own_head_restarts_the_projection_after_it() -> None:
     assert {k for k in headed.state_dict() if ".person_head." in k} <= set(keys)
     assert sorted(grown_keys(person, plain)) == ["net.person_proj.bias", "net.person_proj.weight"]
     assert grown_keys(person, person) == []
+    names = grown_names(keys)
+    assert names[:2] == ["net.person_proj.bias", "net.person_proj.weight"]
+    assert names[2].startswith("net.person_head.* (") and len(names) == 3

@@ -424,7 +424,7 @@ def train_stage(
         module.load_state_dict({k: v.to(own[k].dtype) for k, v in weights.items()})
         fresh = [k for k in grown if k.endswith("detail_gain")]
         if grown:
-            log(f"{stage}: new in this run, not in {init}: {', '.join(sorted(grown))}")
+            log(f"{stage}: new in this run, not in {init}: {', '.join(grown_names(grown))}")
         if fresh and latents is not None:
             module.latent_norm.fit_detail(latents)
         log(f"{stage}: starting from the weights of {init}")
@@ -489,6 +489,15 @@ GROWN = ("detail_gain", "person_proj.weight", "person_proj.bias")
 def grows(key: str) -> bool:
     """Whether a fine-tune may add weight ``key`` to a model that lacks it."""
     return key.endswith(GROWN) or ".person_head." in key
+
+
+def grown_names(keys: Sequence[str]) -> list[str]:
+    """The grown weights for the log: a new head's tensors as one ``net.person_head.*``."""
+    heads = [k for k in keys if ".person_head." in k]
+    names = sorted(k for k in keys if k not in heads)
+    if heads:
+        names.append(f"{heads[0].split('.person_head.')[0]}.person_head.* ({len(heads)} tensors)")
+    return names
 
 
 def grown_keys(own: Mapping[str, Any], loaded: Mapping[str, Any]) -> list[str]:
