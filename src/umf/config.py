@@ -113,7 +113,7 @@ class DenoiserConfig:
     # read own prompts through a text head of their own (same shape as the scene's) instead
     # of the scene's: the S-Flow's scene captions never name a gesture, so its head gives
     # "raises both hands", "raises the right hand" and "... the left hand" one token (cosine
-    # 0.86-0.95) and person 2 could not be told which (results/umf-small-bandai-20261205)
+    # 0.86-0.95) and person 2 could not be told which (results/umf-small-bandai-20261204c)
     person_head: bool = False
 
 
