@@ -240,3 +240,25 @@ def test_a_new_own_head_restarts_the_projection_after_it() -> None:
     names = grown_names(keys)
     assert names[:2] == ["net.person_proj.bias", "net.person_proj.weight"]
     assert names[2].startswith("net.person_head.* (") and len(names) == 3
+
+
+def test_scene_drop_leaves_the_own_prompt_alone() -> None:
+    """At p_scene_drop 1 every item with an own prompt trains on it beside the empty scene
+    prompt (the same loss as asking so); rows without one keep the scene's."""
+    from umf.models.denoiser import drop_text
+
+    z1 = torch.randn(4, P, R, generator=torch.Generator().manual_seed(0))
+    text, empty, own = make_text(4, seed=1), make_text(1, length=2, seed=2), make_text(4, seed=5)
+    ds = torch.ones(4, dtype=torch.long)
+    present = torch.tensor([True, True, False, True])
+
+    def total(scene: TextFeatures, p_scene_drop: float) -> float:
+        model = pflow(True, p_uncond=0.0, p_person_drop=0.0, p_scene_drop=p_scene_drop)
+        randomise_projection(model)
+        gen = torch.Generator().manual_seed(1)
+        return float(model.loss(z1, scene, empty, ds, generator=gen, person_text=own,
+                                person_present=present)["total"].detach())  # fmt: skip
+
+    alone = total(text, 1.0)
+    assert alone == pytest.approx(total(drop_text(text, empty, present), 0.0), rel=1e-6)
+    assert alone != pytest.approx(total(text, 0.0), rel=1e-3)

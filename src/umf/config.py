@@ -144,6 +144,11 @@ class PFlowConfig:
     p_uncond: float = 0.1
     # chance a training item's own prompt is dropped (with the scene's, always, at p_uncond)
     p_person_drop: float = 0.3
+    # chance an item that keeps its own prompt loses the scene's: the own prompt alone must
+    # say what the person does. Without it a flow sees own prompts beside scene prompts that
+    # mostly name the same action already (single clips, most relations), and leans on the
+    # scene's: "Someone bows politely." under "Two people stand facing each other." bowed 2-8 cm
+    p_scene_drop: float = 0.0
     # CFG scale of an own prompt, apart from the scene prompt's (None: the same scale):
     # v_u + guidance * (v_scene - v_u) + person_guidance * (v_both - v_scene)
     person_guidance: float | None = None
@@ -173,6 +178,7 @@ class SFlowConfig:
     guidance: float = 3.0
     p_uncond: float = 0.1
     p_person_drop: float = 0.3  # as PFlowConfig.p_person_drop
+    p_scene_drop: float = 0.0  # as PFlowConfig.p_scene_drop
     person_guidance: float | None = None  # as PFlowConfig.person_guidance
     lambda_recon: float = 1.0  # 0 = no reconstruction loss (ablation)
     reaction_only: bool = False  # noise-free reaction path (ablation)

@@ -113,11 +113,14 @@ def training_text(
     person_text: TextFeatures | None = None,
     person_present: Tensor | None = None,
     generator: torch.Generator | None = None,
+    p_scene_drop: float = 0.0,
 ) -> TextFeatures | Tensor:
     """A training batch's text: rows in ``drop`` (CFG) get the empty prompt and no own
     prompt; for a model with per-person prompts, the others keep their own prompt (where
-    ``person_present``) unless dropped at ``p_person_drop``. That draw happens only for
-    such a model, so other models see the random stream they always did."""
+    ``person_present``) unless dropped at ``p_person_drop``, and a row that keeps it loses
+    the scene prompt at ``p_scene_drop`` (the own prompt alone must then say what the person
+    does). Those draws happen only for such a model (the last only when ``p_scene_drop`` >
+    0), so other models see the random stream they always did."""
     scene = drop_text(text, uncond_text, drop)
     if person_text is None or net.person_proj is None:
         return scene
@@ -125,6 +128,9 @@ def training_text(
     keep = ~d & ~(torch.rand(d.shape[0], generator=generator, device=d.device) < p_person_drop)
     if person_present is not None:
         keep = keep & person_present.to(keep.device, torch.bool)
+    if p_scene_drop > 0:
+        alone = keep & (torch.rand(d.shape[0], generator=generator, device=d.device) < p_scene_drop)
+        scene = drop_text(text, uncond_text, d | alone)
     return net.encode_text(scene, person_text, keep)
 
 

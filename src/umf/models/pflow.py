@@ -190,7 +190,8 @@ class PFlow(nn.Module):
         sample = pyramid_training_sample(z1, self.pyramid, generator=generator)
         drop = torch.rand(b, generator=generator, device=z1.device) < self.cfg.p_uncond
         cond = training_text(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
-                             person_text, person_present, generator)  # fmt: skip
+                             person_text, person_present, generator,
+                             self.cfg.p_scene_drop)  # fmt: skip
         pred = self.net(
             sample.x,
             sample.t,

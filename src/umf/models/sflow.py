@@ -161,7 +161,8 @@ class SFlow(nn.Module):
         b = w.shape[0]
         drop = torch.rand(b, generator=generator, device=w.device) < self.cfg.p_uncond
         cond = training_text(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
-                             person_text, person_present, generator)  # fmt: skip
+                             person_text, person_present, generator,
+                             self.cfg.p_scene_drop)  # fmt: skip
         pred = self.velocity(sample.x, sample.t, cond)
         parts = semi_noise_loss(
             pred,
