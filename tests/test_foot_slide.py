@@ -64,7 +64,18 @@ def test_sliding_planted_feet_costs_their_excess_speed_and_only_late_in_the_flow
     assert float(decoded_foot_slide(vae, IDENTITY, moving, w_hat, late, frames=10)) == 0.0
 
 
-def test_a_training_step_adds_the_weighted_foot_loss():
+def test_at_most_rows_are_decoded():
+    vae = GlidingDecoder()
+    w, w_hat = torch.zeros(4, 2, 3), torch.zeros(4, 2, 3)
+    w_hat[:, 0, 0] = torch.tensor([0.05, 0.01, 0.01, 0.01])
+    late = torch.ones(4)
+    assert float(decoded_foot_slide(vae, IDENTITY, w, w_hat, late, rows=1, frames=10)) == \
+        pytest.approx(0.05, abs=1e-5)  # fmt: skip
+    assert float(decoded_foot_slide(vae, IDENTITY, w, w_hat, late, rows=4, frames=10)) == \
+        pytest.approx(0.02, abs=1e-5)  # fmt: skip
+
+
+def test_a_training_step_adds_the_weighted_foot_loss_and_trains_only_the_flow():
     from conftest import FakeText, tiny_config
     from umf.pipeline import UMFPipeline
     from umf.text import TextFeatureCache
@@ -76,17 +87,42 @@ def test_a_training_step_adds_the_weighted_foot_loss():
     batch = {"z": torch.randn(6, 2, p, r), "people_mask": torch.ones(6, 2, dtype=torch.bool),
              "dataset": torch.ones(6, dtype=torch.long), "captions": ["a"] * 6}  # fmt: skip
     cache = TextFeatureCache(FakeText())
+    # a normaliser of centimetre-sized spreads: the random tiny VAE's feet then move slowly
+    # enough for some to count as planted
+    tiny = Normalizer(torch.zeros(FEATURE_DIM), torch.full((FEATURE_DIM,), 0.01))
 
-    def step(weight: float) -> dict[str, torch.Tensor]:
+    def stage(weight: float) -> SFlowStage:
         pipe.config.train_sflow.foot_loss, pipe.config.train_sflow.foot_loss_min_t = weight, 0.0
-        stage = SFlowStage(pipe.config, pipe.vae, cache, pipe.sflow, seed=3,
-                           normalizer=pipe.normalizer)  # fmt: skip
-        return stage.training_step(batch, 0)
+        return SFlowStage(pipe.config, pipe.vae, cache, pipe.sflow, seed=3, normalizer=tiny)
 
-    plain, feet = step(0.0), step(2.0)
+    plain, on = stage(0.0).training_step(batch, 0), stage(2.0)
+    feet = on.training_step(batch, 0)
     assert "foot" not in plain and "endpoint" not in feet and "t" not in feet
-    assert float(feet["total"]) == pytest.approx(float(plain["total"]) + 2.0 * float(feet["foot"]),
-                                                 rel=1e-5)  # fmt: skip
+    assert float(feet["foot"]) > 0
+    want = float(plain["total"]) + 2.0 * float(feet["foot"])
+    assert float(feet["total"].detach()) == pytest.approx(want, rel=1e-5)
+    pipe.sflow.zero_grad()
+    (feet["total"] - plain["total"].detach()).backward()  # the foot term's gradient alone
+    grads = [q.grad for q in pipe.sflow.net.parameters() if q.grad is not None]
+    assert grads and sum(float(g.abs().sum()) for g in grads) > 0
+    assert all(q.grad is None for q in pipe.vae.parameters())
+    assert on.validation_step(batch)["foot"] > 0
     pipe.config.train_sflow.foot_loss = 1.0
     with pytest.raises(ValueError, match="normaliser"):
         SFlowStage(pipe.config, pipe.vae, cache, pipe.sflow)
+
+
+def test_the_options_are_checked():
+    from umf.config import set_option, small_config
+    from umf.errors import UMFError
+    from umf.model_checks import check_config_values
+
+    check_config_values(set_option(small_config(), "train_sflow.foot_loss=4.0"))
+    for bad, says in (("train_pflow.foot_loss=1.0", "only train_sflow"),
+                      ("train_sflow.foot_loss=-1.0", "foot_loss"),
+                      ("train_sflow.foot_loss_min_t=1.5", "foot_loss_min_t"),
+                      ("sflow.p_scene_drop=2.0", "p_scene_drop"),
+                      ("sflow.denoiser.person_head=true", "needs sflow.denoiser.person_text"),
+                      ):  # fmt: skip
+        with pytest.raises(UMFError, match=says):
+            check_config_values(set_option(small_config(), bad))

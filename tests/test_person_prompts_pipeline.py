@@ -270,6 +270,11 @@ def test_a_fine_tune_grows_the_projection_and_refuses_a_flow_it_would_not_train(
         finetune(old, tmp_path / "corpus", tmp_path / "run",
                  ["pflow.denoiser.person_text=true", "sflow.denoiser.person_text=true"],
                  Launch(), stages=["pflow"], log=lambda m: None)  # fmt: skip
+    with pytest.raises(UMFError, match="person_head=true needs sflow in --stages"):
+        finetune(old, tmp_path / "corpus", tmp_path / "run2",
+                 ["pflow.denoiser.person_text=true", "sflow.denoiser.person_text=true",
+                  "sflow.denoiser.person_head=true"],
+                 Launch(), stages=["pflow", "vae"], log=lambda m: None)  # fmt: skip
 
 
 def test_cli_dash_skips_a_person(model, tmp_path, fake_text):

@@ -34,13 +34,14 @@ _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every
 
 
 _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
-                 "guidance", "fine_guidance", "person_guidance"}  # fmt: skip  # >= 0
+                 "guidance", "fine_guidance", "person_guidance", "foot_loss"}  # fmt: skip  # >= 0
 
 
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
 
 
-_FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop"}  # floats in [0, 1]
+_FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop", "p_scene_drop",
+              "foot_loss_min_t"}  # fmt: skip  # floats in [0, 1]
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -114,6 +115,13 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         check_float("fps", config.fps, 1.0, 1000.0)
         if config.vae.max_frames < 15:
             raise UMFError(f"vae.max_frames must be at least 15, got {config.vae.max_frames}")
+        for flow in ("pflow", "sflow"):
+            d = getattr(config, flow).denoiser
+            if d.person_head and not d.person_text:
+                raise UMFError(f"{flow}.denoiser.person_head needs {flow}.denoiser.person_text")
+        for stage in ("train_vae", "train_pflow"):  # the loss on decoded feet is the S-Flow's
+            if getattr(config, stage).foot_loss:
+                raise UMFError(f"{stage}.foot_loss: only train_sflow has a foot loss")
 
 
 def check_weight_shapes(path: Path, modules: dict[str, Any]) -> None:

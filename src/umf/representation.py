@@ -238,8 +238,9 @@ def fuse_positions(features: Tensor, position_weight: float, root_weight: float 
     flat = (*lead[:-1], t, NUM_JOINTS * 3)  # explicit sizes: an empty batch stays empty
     rel = _fuse((pos - root).reshape(flat), (vel - root_vel).reshape(flat), position_weight)
     path = _fuse(root.reshape(*flat[:-1], 3), root_vel.reshape(*flat[:-1], 3), root_weight)
-    if height_weight != root_weight:
-        path[..., 1] = _fuse(root[..., 1], root_vel[..., 1], height_weight)[..., 0]
+    if height_weight != root_weight:  # not in place: losses differentiate through it
+        height = _fuse(root[..., 1], root_vel[..., 1], height_weight)
+        path = torch.cat([path[..., :1], height, path[..., 2:]], dim=-1)
     fused = (rel.reshape(pos.shape) + path.reshape(root.shape)).reshape(*lead, 66)
     vel = features[..., VEL].to(torch.float64)
     new_vel = torch.cat([fused[..., 1:, :] - fused[..., :-1, :], vel[..., -1:, :]], dim=-2)

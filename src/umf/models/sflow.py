@@ -176,7 +176,9 @@ class SFlow(nn.Module):
             "recon": parts.recon.detach(),
         }
         if endpoint:
-            end = reaction_endpoint(sample.x, pred, sample.t, reaction_only=self.cfg.reaction_only)
+            # the state detached: a loss on the endpoint shapes the velocity, not the context
+            end = reaction_endpoint(sample.x.detach(), pred, sample.t,
+                                    reaction_only=self.cfg.reaction_only)  # fmt: skip
             out["endpoint"] = self.latent_norm.denormalize(end)
             out["t"] = sample.t.detach()
         return out

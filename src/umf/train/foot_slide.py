@@ -14,10 +14,10 @@ import torch.nn.functional as F
 from torch import Tensor, nn
 
 from umf.models.vae import foot_contact_loss
-from umf.representation import Normalizer, features_to_joints, foot_contacts
+from umf.representation import Normalizer, features_to_joints, foot_contacts, fuse_positions
 
 FOOT_ROWS = 32  # rows of a batch decoded for the loss: the decoder's cost stays bounded
-FOOT_FRAMES = 90  # frames each is decoded to (3 s at 30 fps)
+FOOT_FRAMES = 150  # frames each is decoded to at most (5 s at 30 fps)
 
 
 def decoded_foot_slide(
@@ -29,6 +29,7 @@ def decoded_foot_slide(
     min_t: float = 0.5,
     rows: int = FOOT_ROWS,
     frames: int = FOOT_FRAMES,
+    fusion: tuple[float, float, float | None] | None = None,
 ) -> Tensor:
     """Mean excess speed (m/frame) of ``w_hat``'s decoded feet over ``w``'s where ``w``'s
     decoded feet are planted (:func:`umf.models.vae.foot_contact_loss`).
@@ -37,8 +38,11 @@ def decoded_foot_slide(
     latent units; ``t`` (B,): their flow times. Only rows at ``t >= min_t`` count (up to
     ``rows`` of them): early on the flow points at a blur of every reaction the context
     allows, whose feet slide whatever the flow does. Both are decoded to ``frames`` frames,
-    so the real reaction's contacts and the estimate's are read alike. Gradients reach
-    ``w_hat`` only (the decoder is frozen by its caller). Zero when no row qualifies.
+    so the real reaction's contacts and the estimate's are read alike, and with
+    ``fusion`` (:func:`umf.representation.fuse_positions`'s weights) fused as the pipeline
+    delivers them: the raw decoded positions jitter by centimetres a frame, the size of the
+    contact rule's threshold. Gradients reach ``w_hat`` only (the decoder is frozen by its
+    caller). Zero when no row qualifies.
     """
     keep = torch.nonzero(t >= min_t).squeeze(1)[:rows]
     if keep.numel() == 0:
@@ -46,7 +50,10 @@ def decoded_foot_slide(
     mask = torch.ones(keep.numel(), frames, dtype=torch.bool, device=w.device)
 
     def joints(z: Tensor) -> Tensor:
-        return features_to_joints(normalizer.denormalize(vae.decode(z, mask)))
+        features = normalizer.denormalize(vae.decode(z, mask)).float()
+        if fusion is not None:
+            features = fuse_positions(features, *fusion)
+        return features_to_joints(features)
 
     with torch.no_grad():
         ref = joints(w[keep])

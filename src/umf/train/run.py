@@ -483,20 +483,26 @@ def export_model(
 # Weights a fine-tune may add to the model it starts from: new ones start as built. A new
 # own-prompt head (``denoiser.person_head``) also restarts the projection after it, which
 # was trained on the scene head's output: the fine-tune starts as the model it came from.
-GROWN = ("detail_gain", "person_proj.weight", "person_proj.bias")
+PROJECTION = ("person_proj.weight", "person_proj.bias")
+GROWN = ("detail_gain", *PROJECTION)
+
+
+def _in_person_head(key: str) -> bool:
+    return key.startswith("person_head.") or ".person_head." in key
 
 
 def grows(key: str) -> bool:
     """Whether a fine-tune may add weight ``key`` to a model that lacks it."""
-    return key.endswith(GROWN) or ".person_head." in key
+    return key.endswith(GROWN) or _in_person_head(key)
 
 
 def grown_names(keys: Sequence[str]) -> list[str]:
     """The grown weights for the log: a new head's tensors as one ``net.person_head.*``."""
-    heads = [k for k in keys if ".person_head." in k]
+    heads = [k for k in keys if _in_person_head(k)]
     names = sorted(k for k in keys if k not in heads)
     if heads:
-        names.append(f"{heads[0].split('.person_head.')[0]}.person_head.* ({len(heads)} tensors)")
+        where = heads[0][: heads[0].index("person_head.")]
+        names.append(f"{where}person_head.* ({len(heads)} tensors)")
     return names
 
 
@@ -506,8 +512,8 @@ def grown_keys(own: Mapping[str, Any], loaded: Mapping[str, Any]) -> list[str]:
     projection after it (trained on the scene head's output, it would read the new head's
     as noise; restarted at zero, the own prompt starts with no effect)."""
     grown = [k for k in own if grows(k) and k not in loaded]
-    if any(".person_head." in k for k in grown):
-        grown += [k for k in own if k.endswith(GROWN[1:]) and k not in grown]
+    if any(_in_person_head(k) for k in grown):
+        grown += [k for k in own if k.endswith(PROJECTION) and k not in grown]
     return grown
 
 
@@ -559,7 +565,7 @@ def finetune(
                          [*defaults, *overrides] if fresh else list(overrides))  # fmt: skip
     base = UMFConfig.from_dict(json.loads((model / "config.json").read_text()))
     for flow in ("pflow", "sflow"):
-        for option in ("person_text", "person_head"):  # weights a flow must be trained to have
+        for option in ("person_head", "person_text"):  # weights a flow must be trained to have
             want, had = (getattr(getattr(c, flow).denoiser, option) for c in (cfg, base))
             if want and not had and flow not in stages:
                 raise UMFError(f"{flow}.denoiser.{option}=true needs {flow} in --stages: the "

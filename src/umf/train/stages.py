@@ -21,7 +21,7 @@ from umf.models.sflow import SFlow
 from umf.models.vae import MotionVAE, vae_losses
 from umf.representation import POS, Normalizer
 from umf.text import TextFeatureCache, TextFeatures
-from umf.train.foot_slide import decoded_foot_slide
+from umf.train.foot_slide import FOOT_FRAMES, decoded_foot_slide
 
 
 def _is_scene(batch: dict[str, Any]) -> bool:
@@ -218,6 +218,10 @@ class SFlowStage(_LatentStage):
         self.normalizer = normalizer  # the corpus's: the foot loss decodes to metres
         if config.train_sflow.foot_loss > 0 and normalizer is None:
             raise ValueError("train_sflow.foot_loss needs the corpus normaliser")
+        # the feet are read over the shortest training crop (every latent describes at least
+        # that many frames), at most FOOT_FRAMES (the decoder's cost)
+        self.foot_frames = max(2, min(FOOT_FRAMES, config.train_sflow.min_frames,
+                                      config.vae.max_frames))  # fmt: skip
 
     def modules(self) -> dict[str, nn.Module]:
         return {"sflow": self.sflow, "vae": self.vae}
@@ -260,7 +264,9 @@ class SFlowStage(_LatentStage):
             return out
         t_cfg = self.config.train_sflow
         w_hat, t = out.pop("endpoint"), out.pop("t")
-        slide = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t, t_cfg.foot_loss_min_t)
+        fusion = self.config.vae.fusion_weights(reaction=True)  # as the pipeline decodes them
+        slide = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t, t_cfg.foot_loss_min_t,
+                                   frames=self.foot_frames, fusion=fusion)  # fmt: skip
         out["total"] = out["total"] + t_cfg.foot_loss * slide
         out["foot"] = slide.detach()
         return out
