@@ -1,7 +1,7 @@
 """A corpus with more composed training scenes of one relation: a copy of CORPUS whose train
 split gains N scenes of RELATION, composed from its train clips with a seed of their own.
 
-    python research/extra_scenes.py CORPUS OUT --relation stand_facing --scenes 3000 [--seed 99]
+    python scripts/extra_scenes.py CORPUS OUT --relation stand_facing --scenes 3000 [--seed 99]
 
 Why: ``relation_repeats`` serves the same scenes again (new crops and mirrors, the same
 pairs of clips); the per-person prompts of results/umf-small-bandai-20261204c needed more
