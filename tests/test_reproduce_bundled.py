@@ -45,6 +45,9 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "steps",
         "person",
         "person2",
+        "person-guidance",
+        "head",
+        "both",
         "name",
     ]
     cfg = family_config("small")
@@ -84,6 +87,8 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     # the model_variant stages, which refuse an existing destination, replace one left by a kill
     writes = {st.name: st.writes for st in rb.stages(tmp_path, Path("out/corpus")) if st.writes}
     assert writes == {"sampling": models / "sampling", "steps": models / "steps",
+                      "person-guidance": models / "b", "corpus-6000": tmp_path / "corpus-6000",
+                      "corpus-sf": tmp_path / "corpus-6000-sf",
                       "name": tmp_path / "model"}  # fmt: skip
     teach = stages["teach"][0]
     assert teach[teach.index("--from") + 1] == str(models / "mix")
@@ -117,7 +122,17 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     person2 = stages["person2"][0]
     assert person2[person2.index("--from") + 1] == str(tmp_path / "runs" / "person" / "model")
     assert "train_sflow.relation_repeats=[stand_facing=8]" in _sets(person2)
-    final = tmp_path / "runs" / "person2" / "model"
+    assert stages["person-guidance"][0][2:4] == [str(tmp_path / "runs" / "person2" / "model"),
+                                                 str(models / "b")]  # fmt: skip
+    head, both = stages["head"][0], stages["both"][0]
+    assert head[head.index("--from") + 1] == str(models / "b")
+    assert head[head.index("--corpus") + 1] == str(tmp_path / "corpus-6000")
+    assert both[both.index("--from") + 1] == str(tmp_path / "runs" / "head" / "model")
+    assert both[both.index("--corpus") + 1] == str(tmp_path / "corpus-6000-sf")
+    assert "train_sflow.relation_repeats=[]" in _sets(both)  # head's would carry over
+    assert stages["corpus-sf"][0][2:4] == [str(tmp_path / "corpus-6000"),
+                                           str(tmp_path / "corpus-6000-sf")]  # fmt: skip
+    final = tmp_path / "runs" / "both" / "model"
     assert stages["name"][0][2:4] == [str(final), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
@@ -178,7 +193,8 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
                      "mix", "teach", "reteach", "rebalance", "settle", "pace", "steps", "person",
-                     "person2", "name"]  # fmt: skip
+                     "person2", "person-guidance", "corpus-6000", "corpus-sf", "head", "both",
+                     "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
@@ -196,3 +212,34 @@ def test_every_script_a_stage_runs_exists(tmp_path):
     paths = [Path(a) for c in commands for a in c if a.endswith((".py", ".sh"))]
     assert {p.parent.name for p in paths} == {"scripts"}
     assert all(p.is_file() for p in paths), [p for p in paths if not p.is_file()]
+
+
+def test_prepare_like_rebuilds_a_manifest_with_more_train_scenes(tmp_path):
+    """scripts/prepare_like.py: the manifest's sources and options, the train scenes changed;
+    a source it cannot find or prepare is one error line."""
+    import pytest
+
+    from conftest import load_script
+
+    pl = load_script("prepare_like")
+    (tmp_path / "bandai").mkdir()
+    (tmp_path / "salsa").mkdir()
+    manifest = {"config": {"seed": 7, "train_scenes": 3000, "val_scenes": 20, "test_scenes": 30,
+                           "test_groups": 10},
+                "sources": [{"name": "bandai", "path": str(tmp_path / "bandai")},
+                            {"name": "mocap-salsa", "path": str(tmp_path / "salsa")}]}  # fmt: skip
+    cmd = pl.prepare_command(manifest, tmp_path / "out", 6000)
+    assert cmd[1:5] == ["-m", "umf", "data", "prepare"]
+    pairs = dict(zip(cmd[5::2], cmd[6::2], strict=False))
+    assert pairs["--train-scenes"] == "6000" and pairs["--seed"] == "7"
+    assert pairs["--val-scenes"] == "20" and pairs["--test-groups"] == "10"
+    assert pairs["--bandai"] == str(tmp_path / "bandai")
+    assert pairs["--mocap"] == str(tmp_path / "salsa")
+    assert pl.prepare_command(manifest, tmp_path / "out", None)[
+        cmd.index("--train-scenes") + 1] == "3000"  # fmt: skip
+    manifest["sources"].append({"name": "mocap-gone", "path": str(tmp_path / "gone")})
+    with pytest.raises(SystemExit, match="is gone"):
+        pl.prepare_command(manifest, tmp_path / "out", 6000)
+    manifest["sources"][-1] = {"name": "other", "path": str(tmp_path / "salsa")}
+    with pytest.raises(SystemExit, match="no prepare option"):
+        pl.prepare_command(manifest, tmp_path / "out", 6000)
