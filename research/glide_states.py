@@ -15,8 +15,8 @@ t = 0.25, 0.5 and 0.75,
 
 the sampled reaction at t = 1, and the reaction sampled from a warm start (the reaction half
 at t0 = 0.25 or 0.5 on the training path towards another pair's real follower, or towards
-the P-Flow's own walker for the caption; with the pelvis's mean distance to the real
-follower's: where the warm start puts person 2). Each is
+the P-Flow's own walker for the caption; with the pelvis's distance to the real follower's
+and to the leader's: where the warm start puts person 2). Each is
 decoded (fused as the pipeline delivers people 2..N) and scored against the real W's
 decode: the planted feet's excess speed (m/frame, the foot loss), the pelvis's floor speed
 and the slower foot's speed (m/s; a stride keeps one foot near 0, a glide carries both).
@@ -101,6 +101,17 @@ def main() -> None:
             print(f"  {name:28s} slide {float(slide) * 1000:5.1f} mm/frame   pelvis "
                   f"{pelvis:.2f} m/s   slower foot {slower:.2f} m/s")  # fmt: skip
 
+        leader = decoded(prev[:, 0])
+
+        def placed(lat: torch.Tensor) -> None:
+            """Where person 2 is: from the real follower's pelvis, and from the leader's
+            (floor distance, median over rows of the mean over frames)."""
+            p2 = decoded(lat)[:, :, 0, [0, 2]]
+            real = (p2 - decoded(w)[:, :, 0, [0, 2]]).norm(dim=-1).mean(1).median()
+            lead = (p2 - leader[:, :, 0, [0, 2]]).norm(dim=-1).mean(1).median()
+            print(f"    pelvis {float(real):.2f} m from the real follower's, "
+                  f"{float(lead):.2f} m from the leader's")  # fmt: skip
+
         print(f"model {pipe.name}; {b} real test pairs walking side by side, {frames} frames, "
               f"{steps} S-Flow steps, guidance {cfg.sflow.guidance}")  # fmt: skip
         score("real W (decoded)", w)
@@ -131,10 +142,11 @@ def main() -> None:
                 xw, _ = integrate(field, s.x, steps=k, t0=t0, t1=1.0)
                 react = xw[..., xw.shape[-1] // 2 :]
                 score(f"warm: {name}, t0 {t0}", react)
-                gap = (decoded(react)[:, :, 0] - decoded(w)[:, :, 0]).norm(dim=-1).mean()
-                print(f"    pelvis from the real follower's, mean {float(gap):.2f} m")
-        gap = (decoded(x1[..., x1.shape[-1] // 2 :])[:, :, 0] - decoded(w)[:, :, 0]).norm(dim=-1)
-        print(f"  sampled: pelvis from the real follower's, mean {float(gap.mean()):.2f} m")
+                placed(react)
+        print("  sampled:", end="")
+        placed(x1[..., x1.shape[-1] // 2 :])
+        print("  real:", end="")
+        placed(w)
 
 
 if __name__ == "__main__":
