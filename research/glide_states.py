@@ -56,7 +56,12 @@ def main() -> None:
     from umf.flows.solvers import integrate
     from umf.models.pflow import encode_uncond
     from umf.pipeline import UMFPipeline
-    from umf.representation import features_to_joints, fuse_positions
+    from umf.representation import (
+        features_to_joints,
+        fuse_positions,
+        leader_frame,
+        transform_features,
+    )
     from umf.train.datasets import SceneDataset
     from umf.train.foot_slide import decoded_foot_slide
 
@@ -134,7 +139,20 @@ def main() -> None:
         own, _ = pipe.pflow.sample(text, pipe.text_encoder.encode([""] * b), dataset=1,
                                    generator=g)  # fmt: skip
         own = sflow.latent_norm.normalize(own)
-        for name, guess in (("another follower", other), ("P-Flow's walker", own)):
+        # ... and moved, rigidly on the floor, to where the blur of the S-Flow's first step
+        # starts (its first-frame pelvis and facing), then encoded again
+        blur = reaction_endpoint(x0, field(x0, torch.zeros(b)), torch.zeros(b))
+        raw = lambda lat: fuse_positions(pipe.normalizer.denormalize(  # noqa: E731
+            pipe.vae.decode(sflow.latent_norm.denormalize(lat), mask)), *fusion)  # fmt: skip
+        walker, there = raw(own), raw(blur)
+        moved = torch.stack([
+            transform_features(transform_features(f, leader_frame(f)), leader_frame(g),
+                               inverse=True)
+            for f, g in zip(walker, there, strict=True)])  # fmt: skip
+        placed_own = sflow.latent_norm.normalize(pipe._encode(moved))
+        guesses = (("another follower", other), ("P-Flow's walker", own),
+                   ("P-Flow's walker, placed", placed_own))  # fmt: skip
+        for name, guess in guesses:
             for t0 in (0.25, 0.5):
                 s = semi_noise_state(context, guess, eps, torch.full((b,), t0),
                                      reaction_start=start)  # fmt: skip
