@@ -227,7 +227,7 @@ def test_an_own_head_reads_the_own_prompt_apart_from_the_scene_head() -> None:
 def test_a_new_own_head_restarts_the_projection_after_it() -> None:
     """A fine-tune that adds the own head takes it and the projection as built (zero, so
     the own prompt starts with no effect); one that adds own prompts takes the projection."""
-    from umf.train.run import grown_keys, grown_names
+    from umf.train.growth import grown_keys, grown_names
 
     plain, person = sflow(False).state_dict(), sflow(True).state_dict()
     headed = sflow(True, denoiser=tiny_denoiser(person_text=True, person_head=True))

@@ -256,7 +256,8 @@ def test_a_fine_tune_grows_the_projection_and_refuses_a_flow_it_would_not_train(
     from umf.checkpoint import checked_weights
     from umf.config import UMFConfig
     from umf.models.pflow import PFlow
-    from umf.train.run import Launch, finetune, grows
+    from umf.train.growth import grows
+    from umf.train.run import Launch, finetune
 
     old = save_tiny_model(tmp_path / "old", seed=1)
     cfg = UMFConfig.from_dict(json.loads((old / "config.json").read_text()))
