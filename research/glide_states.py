@@ -56,12 +56,7 @@ def main() -> None:
     from umf.flows.solvers import integrate
     from umf.models.pflow import encode_uncond
     from umf.pipeline import UMFPipeline
-    from umf.representation import (
-        features_to_joints,
-        fuse_positions,
-        leader_frame,
-        transform_features,
-    )
+    from umf.representation import features_to_joints, leader_frame, transform_features
     from umf.train.datasets import SceneDataset
     from umf.train.foot_slide import decoded_foot_slide
 
@@ -93,10 +88,12 @@ def main() -> None:
         steps = cfg.sflow.steps_for(2)
         fusion = cfg.vae.fusion_weights(reaction=True)
 
+        def features(lat: torch.Tensor) -> torch.Tensor:
+            """S-Flow-normalised latents decoded as the pipeline delivers people 2..N."""
+            return pipe.decode(sflow.latent_norm.denormalize(lat), frames, reaction=True)
+
         def decoded(lat: torch.Tensor) -> torch.Tensor:
-            f = pipe.normalizer.denormalize(pipe.vae.decode(sflow.latent_norm.denormalize(lat),
-                                                            mask))  # fmt: skip
-            return features_to_joints(fuse_positions(f, *fusion))
+            return features_to_joints(features(lat))
 
         def score(name: str, lat: torch.Tensor) -> None:
             slide = decoded_foot_slide(pipe.vae, pipe.normalizer, sflow.latent_norm.denormalize(w),
@@ -142,9 +139,7 @@ def main() -> None:
         # ... and moved, rigidly on the floor, to where the blur of the S-Flow's first step
         # starts (its first-frame pelvis and facing), then encoded again
         blur = reaction_endpoint(x0, field(x0, torch.zeros(b)), torch.zeros(b))
-        raw = lambda lat: fuse_positions(pipe.normalizer.denormalize(  # noqa: E731
-            pipe.vae.decode(sflow.latent_norm.denormalize(lat), mask)), *fusion)  # fmt: skip
-        walker, there = raw(own), raw(blur)
+        walker, there = features(own), features(blur)
         moved = torch.stack([
             transform_features(transform_features(f, leader_frame(f)), leader_frame(g),
                                inverse=True)

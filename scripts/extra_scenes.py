@@ -37,10 +37,8 @@ def main() -> None:
         raise SystemExit(f"error: {args.out} exists")
     corpus = Corpus.load(args.corpus)
     actors = [_actor(c) for c in corpus.split_clips("train") if c.num_people == 1]
-    sizes = (
-        tuple(s for s in RELATIONS[args.relation].sizes if s == 2)
-        or RELATIONS[args.relation].sizes[:1]
-    )
+    sizes = RELATIONS[args.relation].sizes
+    sizes = (2,) if 2 in sizes else sizes[:1]  # pairs where the relation has them
     extra = compose_corpus(actors, args.scenes, sizes, seed=args.seed, relations=[args.relation])
     for r in extra:
         r["id"] = f"train-extra-{r['id']}"
