@@ -80,7 +80,11 @@ def main() -> None:
         text = pipe.text_encoder.encode([it["caption"] for it in items])
         cond = {"text": sflow.net.encode_text(text)}
         uncond = {"text": encode_uncond(sflow.net, pipe.text_encoder.encode([""] * b), b)}
-        field = classifier_free_guidance(sflow.velocity, cfg.sflow.guidance, cond, uncond)
+        guided = classifier_free_guidance(sflow.velocity, cfg.sflow.guidance, cond, uncond)
+
+        def field(x: torch.Tensor, t: torch.Tensor) -> torch.Tensor:
+            return guided(x, t, context=context)  # read by sflow.context_condition
+
         sigma = cfg.sflow.reaction_noise
         eps = torch.randn(context.shape, generator=g)
         start = context + sigma * torch.randn(context.shape, generator=g)

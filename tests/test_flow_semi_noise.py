@@ -14,6 +14,7 @@ from umf.flows import (
     semi_noise_state,
     semi_noise_training_sample,
     split_halves,
+    warm_state,
 )
 
 F64 = torch.float64
@@ -279,3 +280,43 @@ def test_shape_messages():
         semi_noise_training_sample(c, c[..., :5])
     with pytest.raises(ValueError, match=r"^joint state needs an even channel count, got 5$"):
         split_halves(c[..., :5])
+
+
+@pytest.mark.parametrize("reaction_only", [False, True])
+def test_warm_state_is_the_training_state_towards_the_proposal(reaction_only: bool) -> None:
+    """At t the warm state is what training puts there had the reaction been the proposal:
+    t*C + (1-t)*eps || t*P + (1-t)*(C + sigma eps')."""
+    c, p, eps = _data(10, F64)
+    start = c + 0.125 * torch.randn(c.shape, generator=torch.Generator().manual_seed(3), dtype=F64)
+    x0 = start if reaction_only else torch.cat([eps, start], -1)
+    for t in (0.25, 0.5, 0.9):
+        got = warm_state(x0, c, p, t, reaction_only=reaction_only)
+        want = semi_noise_state(c, p, eps, torch.full((B,), t, dtype=F64),
+                                reaction_only=reaction_only, reaction_start=start).x  # fmt: skip
+        torch.testing.assert_close(got, want, atol=1e-12, rtol=0)
+    for t in (0.0, 1.0, -0.5):
+        with pytest.raises(ValueError, match="0 < t < 1"):
+            warm_state(x0, c, p, t)
+
+
+def test_warm_sampler_starts_at_t0_with_the_remaining_steps() -> None:
+    """A still field leaves the warm state as it is; a field pointing at [C || W] reaches W
+    from it; the steps are the remaining share, evaluated from t0 on."""
+    c, p, eps = _data(11, F64)
+    times: list[float] = []
+
+    def still(x: torch.Tensor, t: torch.Tensor, **_: Any) -> torch.Tensor:
+        times.append(float(t[0]))
+        return torch.zeros_like(x)
+
+    out = sample_semi_noise(still, c, steps=4, noise=eps, warm=p, warm_t=0.5)
+    assert out.nfe == 2 and times == [0.5, 0.75]
+    torch.testing.assert_close(out.x, 0.5 * p + 0.5 * c, atol=1e-12, rtol=0)
+    _, w, _ = _data(12, F64)
+    out = sample_semi_noise(_state_oracle(c, w), c, steps=10, noise=eps, warm=p, warm_t=0.3)
+    assert out.nfe == 7
+    torch.testing.assert_close(out.x, w, atol=1e-12, rtol=0)
+    cold = sample_semi_noise(still, c, steps=4, noise=eps, warm=p, warm_t=0.0)
+    assert cold.nfe == 4 and torch.equal(cold.x, c)  # 0: the usual start
+    one = sample_semi_noise(still, c, steps=1, noise=eps, warm=p, warm_t=0.9)
+    assert one.nfe == 1  # at least one step

@@ -102,6 +102,7 @@ VARIANTS = [
     {"lambda_recon": 0.0},
     {"context_adapter": False},
     {"context_positional": True, "context_noise": 0.1},
+    {"context_condition": True, "reaction_noise": 0.5},
 ]
 
 
@@ -275,3 +276,72 @@ def test_sampling_starts_the_reaction_at_the_context_plus_reaction_noise(monkeyp
     torch.testing.assert_close(starts[0.0], torch.zeros_like(starts[0.0]), atol=1e-5, rtol=0)
     spread = float(starts[0.5].std())
     assert 0.4 < spread < 0.6, spread  # 3 x 16 x 8 draws of N(0, 0.5^2)
+
+
+def test_the_context_beside_the_state_starts_as_the_model_without_it() -> None:
+    """``context_condition`` adds C to each latent token through a zero-initialised
+    projection: with a plain model's weights it computes exactly what that model does,
+    guided and unguided; once the projection moves, the context changes the velocity."""
+    plain, model = sflow().eval(), sflow(context_condition=True).eval()
+    missing, unexpected = model.load_state_dict(plain.state_dict(), strict=False)
+    assert sorted(missing) == ["net.cond_proj.bias", "net.cond_proj.weight"] and not unexpected
+    prev, mask, _ = sbatch()
+    text, empty = make_text(3), make_text(1, length=2, seed=5)
+    x, t = torch.randn(3, P, 2 * R), torch.rand(3)
+    c = plain.context(prev, mask)
+    with torch.no_grad():
+        assert torch.equal(model.velocity(x, t, text, c), plain.velocity(x, t, text))
+        for guidance in (None, 2.0):
+            a, _ = plain.sample(prev, mask, text, empty, guidance=guidance,
+                                generator=torch.Generator().manual_seed(0))  # fmt: skip
+            b, _ = model.sample(prev, mask, text, empty, guidance=guidance,
+                                generator=torch.Generator().manual_seed(0))  # fmt: skip
+            torch.testing.assert_close(a, b, atol=1e-6, rtol=0)
+        torch.nn.init.normal_(model.net.cond_proj.weight, std=0.5)
+        moved = model.velocity(x, t, text, c)
+        assert not torch.allclose(moved, plain.velocity(x, t, text))
+        assert not torch.allclose(model.velocity(x, t, text, c + 1.0), moved)
+    with pytest.raises(ValueError, match="pass context"):
+        model.velocity(x, t, text)
+    torch.manual_seed(0)
+    pf = PFlow(PFlowConfig(denoiser=tiny_denoiser()), P, R, D_TEXT)
+    with pytest.raises(ValueError, match="own transformer"):
+        sflow(backbone=pf.net, shared_backbone=True, context_condition=True)
+
+
+def test_a_noisy_reaction_start_needs_the_context_beside_the_state() -> None:
+    """w = C + offset(text) with the reaction half starting at C + eps' (sigma 1): the state
+    shows C only through noise, so the plain S-Flow's samples miss C by far more than the one
+    that reads C beside the state (same data, steps and seeds)."""
+
+    def trained_error(**kw: Any) -> float:
+        torch.manual_seed(0)
+        g = torch.Generator().manual_seed(0)
+        offsets = 2.0 * torch.randn(2, 1, R, generator=g)
+        texts, empty = make_text(2, length=4, seed=7), make_text(1, length=2, seed=8)
+        cfg = SFlowConfig(denoiser=tiny_denoiser(num_layers=2), context_heads=2,
+                          context_ff_dim=32, context_layers=1, steps=8, reaction_noise=1.0,
+                          context_adapter=False, **kw)  # fmt: skip
+        model = SFlow(cfg, P, R, D_TEXT)
+        opt = torch.optim.AdamW(model.parameters(), lr=5e-3)
+
+        def draw(b: int) -> tuple[torch.Tensor, ...]:
+            cls = torch.randint(0, 2, (b,), generator=g)
+            prev = torch.randn(b, 1, P, R, generator=g)
+            w = prev[:, 0] + offsets[cls]
+            return TextFeatures(texts.tokens[cls], texts.mask[cls], texts.pooled[cls]), prev, w
+
+        one = torch.ones(16, 1, dtype=torch.bool)
+        for _ in range(200):
+            text, prev, w = draw(16)
+            loss = model.loss(prev, one, w, text, empty, generator=g)["total"]
+            opt.zero_grad()
+            loss.backward()
+            opt.step()
+        text, prev, w = draw(64)
+        pred, _ = model.sample(prev, torch.ones(64, 1, dtype=torch.bool), text, empty,
+                               guidance=1.0, generator=g)  # fmt: skip
+        return float((pred - w).square().mean())
+
+    plain, beside = trained_error(), trained_error(context_condition=True)
+    assert beside < 0.5 * plain, (beside, plain)

@@ -192,6 +192,14 @@ class SFlowConfig:
     # flows' own latents decode to a person 1 up to 0.7 m and 100 degrees off the canonical
     # start, and a context that is not a posterior mean; False: the sampled latents as is)
     reencode_context: bool = False
+    # > 0: after the usual pass, each added person is sampled again from this time on the
+    # path towards a proposal (the P-Flow's own motion for the prompt, moved to where the
+    # first pass starts): the near-deterministic start glides (umf.warm_start)
+    warm_start: float = 0.0
+    # the context C also enters the transformer beside the state, clean at every t (not in
+    # the paper): the state shows C only blurred by noise early on, so a noisier reaction
+    # start (reaction_noise) lost where person 2 stands (results/flows-long-h200-20261126)
+    context_condition: bool = False
 
     def steps_for(self, num_people: int) -> int:
         """ODE steps per added person in a scene of ``num_people``."""

@@ -41,7 +41,7 @@ _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats >
 
 
 _FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop", "p_scene_drop",
-              "foot_loss_min_t"}  # fmt: skip  # floats in [0, 1]
+              "foot_loss_min_t", "warm_start"}  # fmt: skip  # floats in [0, 1]
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -119,6 +119,11 @@ def check_config_values(config: Any, prefix: str = "") -> None:
             d = getattr(config, flow).denoiser
             if d.person_head and not d.person_text:
                 raise UMFError(f"{flow}.denoiser.person_head needs {flow}.denoiser.person_text")
+        if config.sflow.context_condition and config.sflow.shared_backbone:
+            raise UMFError("sflow.context_condition needs the S-Flow's own transformer "
+                           "(not sflow.shared_backbone)")  # fmt: skip
+        if config.sflow.warm_start >= 1.0:
+            raise UMFError(f"sflow.warm_start must be below 1, got {config.sflow.warm_start}")
         for stage in ("train_vae", "train_pflow"):  # the loss on decoded feet is the S-Flow's
             if getattr(config, stage).foot_loss:
                 raise UMFError(f"{stage}.foot_loss: only train_sflow has a foot loss")

@@ -43,6 +43,7 @@ from umf.flows.semi_noise import (
     semi_noise_state,
     semi_noise_training_sample,
     split_halves,
+    warm_state,
 )
 from umf.flows.solvers import (
     EVALS_PER_STEP,
@@ -101,4 +102,5 @@ __all__ = [
     "target_velocity",
     "time_grid",
     "up",
+    "warm_state",
 ]

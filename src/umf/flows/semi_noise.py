@@ -177,6 +177,22 @@ def semi_noise_initial_state(
     return torch.cat([noise, start], dim=-1)
 
 
+def warm_state(
+    x0: Tensor, context: Tensor, warm: Tensor, t: float, *, reaction_only: bool = False
+) -> Tensor:
+    """The joint state at time ``t`` on the path from ``x0`` ([eps || start]) to [C || warm]:
+    t*C + (1-t)*eps in the context half, t*warm + (1-t)*start in the reaction half.
+
+    Why: from the near-deterministic start the first Euler steps point at the average
+    reaction, a body that glides (``research/glide_states.py``); on the training path
+    towards one particular reaction the predictions stride.
+    """
+    if not 0.0 < t < 1.0:
+        raise ValueError(f"a warm start needs 0 < t < 1, got {t}")
+    end = warm if reaction_only else torch.cat([context, warm], dim=-1)
+    return interpolate(x0, end, t)
+
+
 def sample_semi_noise(
     velocity: Velocity,
     context: Tensor,
@@ -188,15 +204,24 @@ def sample_semi_noise(
     generator: Generators = None,
     cond: Mapping[str, Any] | None = None,
     reaction_noise: float = 0.0,
+    warm: Tensor | None = None,
+    warm_t: float = 0.0,
 ) -> ODESolution:
     """Integrate the joint state from t = 0 to 1 once and return the reaction half.
 
     One pass yields the reaction (the authors' release ran the ODE twice; SPEC 7 (b)).
+    ``warm`` (B, p, r), a proposed reaction: start at ``warm_t`` on the straight path from
+    the t = 0 state towards [C || warm] (the state training puts there had the reaction
+    been ``warm``) with the remaining share of ``steps`` (:func:`warm_state`).
     """
     x0 = semi_noise_initial_state(
         context, reaction_only=reaction_only, noise=noise, generator=generator,
         reaction_noise=reaction_noise,
     )  # fmt: skip
-    x1, nfe = integrate(velocity, x0, steps=steps, method=method, cond=cond)
+    t0 = 0.0
+    if warm is not None and warm_t > 0:
+        x0, t0 = warm_state(x0, context, warm, warm_t, reaction_only=reaction_only), warm_t
+        steps = max(1, round(steps * (1.0 - t0)))
+    x1, nfe = integrate(velocity, x0, steps=steps, t0=t0, method=method, cond=cond)
     reaction = x1 if reaction_only else split_halves(x1)[1]
     return ODESolution(reaction, nfe)

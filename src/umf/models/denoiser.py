@@ -227,6 +227,7 @@ class FlowTransformer(nn.Module):
         text_pool: Pooling = "mean",
         *,
         layout: Layout = "1d",
+        latent_cond_dim: int = 0,
     ):
         super().__init__()
         if num_stages < 1 or num_datasets < 0:
@@ -240,6 +241,12 @@ class FlowTransformer(nn.Module):
             raise ValueError(f"{num_tokens} tokens cannot be pooled {num_stages - 1} times")
 
         self.in_proj = nn.Linear(in_dim, d)
+        # a per-token condition beside the state (the S-Flow's clean context), added to each
+        # latent token; zero at first, so a model fine-tuned with it starts as it was
+        self.cond_proj = nn.Linear(latent_cond_dim, d) if latent_cond_dim else None
+        if self.cond_proj is not None:
+            nn.init.zeros_(self.cond_proj.weight)
+            nn.init.zeros_(self.cond_proj.bias)
         self.pos = nn.Parameter(torch.empty(num_tokens, d))
         self.time_mlp = nn.Sequential(nn.Linear(d, d), nn.SiLU(), nn.Linear(d, d))
         self.stage_emb = nn.Embedding(num_stages, d) if num_stages > 1 else None
@@ -325,9 +332,12 @@ class FlowTransformer(nn.Module):
         stage: Tensor | None = None,
         dataset: Tensor | None = None,
         token_mask: Tensor | None = None,
+        latent_cond: Tensor | None = None,
     ) -> Tensor:
         """x (B, n, in_dim), t (B,) global time -> velocity (B, n, out_dim).
 
+        ``latent_cond`` (B, n, latent_cond_dim): a per-token condition, required exactly
+        when the model was built with ``latent_cond_dim``.
         ``stage`` (B,) long in [1, K] (None: full resolution); ``dataset`` (B,) long,
         required when the model has dataset tokens; ``token_mask`` (B, n) True at valid
         tokens (None: the first ``tokens_at(stage)`` tokens). ``text`` is TextFeatures or a
@@ -356,6 +366,10 @@ class FlowTransformer(nn.Module):
             dataset = dataset.to(device=x.device, dtype=torch.long)
             prefix.append(self.dataset_emb(dataset))
         latents = self.in_proj(x) + self.positions()[stage - 1, :n]
+        if (self.cond_proj is None) != (latent_cond is None):
+            raise ValueError("pass latent_cond exactly when the model has a latent condition")
+        if self.cond_proj is not None:
+            latents = latents + self.cond_proj(latent_cond)
         h = torch.cat([torch.stack(prefix, 1), latents], dim=1)
 
         kpm = None

@@ -82,6 +82,8 @@ class SFlow(nn.Module):
         self.out_adapter: nn.Linear | None = None
         if cfg.shared_backbone != (backbone is not None):
             raise ValueError("pass the P-Flow backbone exactly when cfg.shared_backbone is set")
+        if backbone is not None and cfg.context_condition:
+            raise ValueError("sflow.context_condition needs the S-Flow's own transformer")
         if backbone is not None:
             if backbone.num_tokens != num_tokens:
                 raise ValueError(f"backbone has {backbone.num_tokens} tokens, not {num_tokens}")
@@ -98,15 +100,22 @@ class SFlow(nn.Module):
                 num_stages=1,
                 num_datasets=0,
                 text_pool=text_pool,
+                latent_cond_dim=latent_dim if cfg.context_condition else 0,
             )
 
     def forward(self, *args: Any, **kwargs: Any) -> dict[str, Tensor]:
         return self.loss(*args, **kwargs)
 
-    def velocity(self, x: Tensor, t: Tensor, text: TextFeatures | Tensor) -> Tensor:
-        """Velocity of the joint state x (B, p, state_dim) at time t (B,)."""
+    def velocity(
+        self, x: Tensor, t: Tensor, text: TextFeatures | Tensor, context: Tensor | None = None
+    ) -> Tensor:
+        """Velocity of the joint state x (B, p, state_dim) at time t (B,); ``context`` (B, p,
+        r), the adapter's C, is read by a model with ``context_condition`` (and needed)."""
         if self.in_adapter is None or self.out_adapter is None:
-            return self.net(x, t, text)
+            cond = context if self.cfg.context_condition else None
+            if self.cfg.context_condition and context is None:
+                raise ValueError("this S-Flow reads the context beside the state: pass context")
+            return self.net(x, t, text, latent_cond=cond)
         kw: dict[str, Tensor] = {}
         if self.net.num_datasets > 0:
             index = min(MULTI_PERSON, self.net.num_datasets - 1)
@@ -163,7 +172,7 @@ class SFlow(nn.Module):
         cond = training_text(self.net, self.cfg.p_person_drop, text, uncond_text, drop,
                              person_text, person_present, generator,
                              self.cfg.p_scene_drop)  # fmt: skip
-        pred = self.velocity(sample.x, sample.t, cond)
+        pred = self.velocity(sample.x, sample.t, cond, context)
         parts = semi_noise_loss(
             pred,
             sample.target,
@@ -197,8 +206,12 @@ class SFlow(nn.Module):
         generator: Generators = None,
         person_text: TextFeatures | None = None,
         person_present: Tensor | None = None,
+        warm: Tensor | None = None,
     ) -> tuple[Tensor, int]:
         """The next person's latent (B, p, r) and the NFE, integrating the ODE once.
+
+        ``warm`` (B, p, r) on the VAE's scale: a proposed reaction to start from at
+        ``warm_start`` (:func:`umf.flows.warm_state`; ignored when that is 0).
 
         Defaults come from the config; ``guidance`` None or 1.0 disables CFG (the
         unconditional side has neither prompt). ``person_text`` / ``person_present``: the
@@ -233,7 +246,9 @@ class SFlow(nn.Module):
                 method=solver or self.cfg.solver,  # type: ignore[arg-type]
                 reaction_only=self.cfg.reaction_only,
                 generator=generator,
-                cond=cond,
+                cond={**cond, "context": context},  # beside the state (context_condition)
                 reaction_noise=self.cfg.reaction_noise,
+                warm=None if warm is None else self.latent_norm.normalize(warm),
+                warm_t=self.cfg.warm_start,
             )
         return self.latent_norm.denormalize(w), nfe

@@ -11,7 +11,8 @@ from typing import Any
 # own-prompt head (``denoiser.person_head``) also restarts the projection after it, which
 # was trained on the scene head's output: the fine-tune starts as the model it came from.
 PROJECTION = ("person_proj.weight", "person_proj.bias")
-GROWN = ("detail_gain", *PROJECTION)
+# The S-Flow's context beside its state (``sflow.context_condition``) starts at zero too.
+GROWN = ("detail_gain", *PROJECTION, "cond_proj.weight", "cond_proj.bias")
 
 
 def _in_person_head(key: str) -> bool:

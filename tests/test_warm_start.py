@@ -1,0 +1,110 @@
+"""The warm start of people 2..N (``sflow.warm_start``): the proposal's placement and the
+pipeline's second S-Flow pass (tiny models; the flow maths is in test_flow_semi_noise)."""
+
+from __future__ import annotations
+
+import json
+import math
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import MODULE, FakeText, save_tiny_model
+from umf import representation as rep
+from umf.errors import UMFError
+from umf.pipeline import UMFPipeline
+from umf.rotations import yaw_matrix
+from umf.warm_start import move_onto
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+def _moved(joints: torch.Tensor, yaw: float, shift: tuple[float, float]) -> torch.Tensor:
+    turned = joints @ yaw_matrix(torch.tensor(yaw, dtype=joints.dtype)).T
+    return rep.joints_to_features(turned + torch.tensor([shift[0], 0.0, shift[1]],
+                                                        dtype=joints.dtype))  # fmt: skip
+
+
+def test_a_proposal_moves_rigidly_onto_the_first_frame_of_another(real_joints):
+    """First-frame pelvis and facing become the target's; the motion itself (every frame's
+    pelvis relative to the first, heights, local rotations) is unchanged up to the turn."""
+    walk = _moved(real_joints, 2.0, (3.0, -1.0))
+    there = _moved(real_joints.flip(0), -0.7, (-2.0, 4.0))  # another motion, elsewhere
+    moved = move_onto(walk[None], there[None])[0]
+    j, jt, j0 = (rep.features_to_joints(f) for f in (moved, there, walk))
+    assert torch.allclose(j[0, 0, [0, 2]], jt[0, 0, [0, 2]], atol=1e-9)
+    turn = float(rep.heading_angle(j[0]) - rep.heading_angle(jt[0]))
+    assert abs(math.remainder(turn, 2 * math.pi)) < 1e-6
+    assert torch.allclose(j[..., 1], j0[..., 1], atol=1e-9)  # heights kept
+    travel = (j[:, 0, [0, 2]] - j[:1, 0, [0, 2]]).norm(dim=-1)
+    assert torch.allclose(travel, (j0[:, 0, [0, 2]] - j0[:1, 0, [0, 2]]).norm(dim=-1), atol=1e-9)
+    assert torch.allclose(moved[:, rep.VEL.stop :], walk[:, rep.VEL.stop :])
+
+
+@pytest.fixture(scope=MODULE)
+def models(tmp_path_factory):
+    """The same tiny weights, cold and warm (``sflow.warm_start`` 0.5)."""
+    cold = save_tiny_model(tmp_path_factory.mktemp("warm") / "cold", seed=4, person_prompts=True)
+    warm = Path(shutil.copytree(cold, cold.parent / "warm"))
+    cfg = json.loads((warm / "config.json").read_text())
+    cfg["sflow"]["warm_start"] = 0.5
+    (warm / "config.json").write_text(json.dumps(cfg))
+    return {k: UMFPipeline.from_pretrained(p, text_encoder=FakeText())
+            for k, p in (("cold", cold), ("warm", warm))}  # fmt: skip
+
+
+def _scene(pipe, people=3, seed=0, own=None):
+    return pipe("two people walk side by side", num_people=people, seconds=1.0, seed=seed,
+                fit=False, separate=False, person_prompts=own)[0]  # fmt: skip
+
+
+def test_warm_start_samples_people_2_to_n_again_from_a_proposal(models):
+    cold, warm = _scene(models["cold"]), _scene(models["warm"])
+    # person 1 is the P-Flow's alone: the same; people 2..N differ
+    assert np.array_equal(cold.joints[0], warm.joints[0])
+    assert not np.allclose(cold.joints[1:], warm.joints[1:])
+    # per added person: S-Flow 3 steps, the P-Flow's proposal 4 + 2, S-Flow again from 0.5
+    assert cold.meta["nfe"] == 6 + 2 * 3
+    assert warm.meta["nfe"] == 6 + 2 * (3 + 6 + 2)
+    again = _scene(models["warm"])
+    assert np.array_equal(again.joints, warm.joints)  # seeded
+    assert not np.array_equal(_scene(models["warm"], seed=1).joints, warm.joints)
+    assert np.isfinite(warm.joints).all()
+
+
+def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models):
+    plain = _scene(models["warm"], people=2)
+    own = _scene(models["warm"], people=2, own=[None, "waves with the right hand"])
+    assert np.array_equal(plain.joints[0], own.joints[0])
+    assert not np.allclose(plain.joints[1], own.joints[1])
+
+
+def test_the_proposal_matters(models, monkeypatch):
+    """The second pass starts from what :func:`umf.warm_start.proposal` returns."""
+    import umf.pipeline
+
+    base = _scene(models["warm"], people=2)
+    real = umf.pipeline.proposal
+
+    def shifted(pipe, first, *args):
+        z, nfe = real(pipe, first, *args)
+        return z + 1.0, nfe
+
+    monkeypatch.setattr(umf.pipeline, "proposal", shifted)
+    other = _scene(models["warm"], people=2)
+    assert np.array_equal(base.joints[0], other.joints[0])
+    assert not np.allclose(base.joints[1], other.joints[1])
+
+
+@pytest.mark.parametrize("value", [1.0, 1.5, -0.1])
+def test_warm_start_out_of_range_is_refused(value):
+    from conftest import tiny_config
+    from umf.config import set_option
+    from umf.model_checks import check_config_values
+
+    cfg = set_option(tiny_config(), f"sflow.warm_start={value}")
+    with pytest.raises(UMFError, match="warm_start"):
+        check_config_values(cfg)
