@@ -196,6 +196,11 @@ class SFlowConfig:
     # path towards a proposal (the P-Flow's own motion for the prompt, moved to where the
     # first pass starts): the near-deterministic start glides (umf.warm_start)
     warm_start: float = 0.0
+    # what the warm start starts from: "pflow" (the P-Flow's motion: person 1's role) or
+    # "retrieved" (one of the warm_neighbours real training reactions nearest to the first
+    # pass: its role; the model directory's reactions.safetensors, umf.reaction_bank)
+    warm_proposal: str = "pflow"
+    warm_neighbours: int = 4
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction
     # start (reaction_noise) lost where person 2 stands (results/flows-long-h200-20261126)

@@ -122,6 +122,12 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if config.sflow.context_condition and config.sflow.shared_backbone:
             raise UMFError("sflow.context_condition needs the S-Flow's own transformer "
                            "(not sflow.shared_backbone)")  # fmt: skip
+        if config.sflow.warm_proposal not in ("pflow", "retrieved"):
+            raise UMFError("sflow.warm_proposal must be 'pflow' or 'retrieved', got "
+                           f"{config.sflow.warm_proposal!r}")  # fmt: skip
+        if config.sflow.warm_neighbours < 1:
+            raise UMFError(f"sflow.warm_neighbours must be at least 1, got "
+                           f"{config.sflow.warm_neighbours}")  # fmt: skip
         if config.sflow.warm_start >= 1.0:
             raise UMFError(f"sflow.warm_start must be below 1, got {config.sflow.warm_start}")
         for stage in ("train_vae", "train_pflow"):  # the loss on decoded feet is the S-Flow's

@@ -39,6 +39,7 @@ from umf.person_prompts import (
     person_text,
     takes_person_prompts,
 )
+from umf.reaction_bank import ReactionBank
 from umf.representation import (
     CONTACT,
     Normalizer,
@@ -93,6 +94,7 @@ class UMFPipeline:
         self.name = name
         self.device = torch.device("cpu")
         self.vocabulary = None  # what the model was trained on (umf.coverage), when it says
+        self.reactions = None  # its real reactions (umf.reaction_bank), when it has them
 
     # ------------------------------------------------------------------ loading
     @classmethod
@@ -160,6 +162,7 @@ class UMFPipeline:
         from umf.coverage import Vocabulary
 
         pipe.vocabulary = Vocabulary.load(path)
+        pipe.reactions = ReactionBank.load(path, pipe.vae.latent_shape)
         for m in (pipe.vae, pipe.pflow, pipe.sflow):
             m.float().eval()
         return pipe
@@ -173,8 +176,9 @@ class UMFPipeline:
         modules = {"vae": self.vae, "pflow": self.pflow, "sflow": self.sflow}
         out = save_checkpoint(path, modules, config=self.config.to_dict(),
                               normalizer=self.normalizer, name=name or self.name)  # fmt: skip
-        if self.vocabulary is not None:
-            self.vocabulary.save(out)
+        for extra in (self.vocabulary, self.reactions):
+            if extra is not None:
+                extra.save(out)
         return out
 
     def coverage(self, prompts: Sequence[str]) -> list[dict | None]:

@@ -8,10 +8,17 @@ which keeps planted feet put, then leaves the follower behind
 one particular reaction, the same network predicts a stride.
 
 So with ``sflow.warm_start`` t0 > 0 each added person is sampled twice. The first (usual)
-pass says where the person stands and which way they face; the P-Flow, which makes sharp
-single people, proposes a motion for the prompt (and the person's own prompt); the proposal
-is moved rigidly on the floor to where the first pass starts; and the S-Flow runs again
-from t0 on the path towards that proposal, with the context as always.
+pass says where the person stands, which way they face and what their role is; a sharp
+motion is proposed; and the S-Flow runs again from t0 on the path towards that proposal,
+with the context as always. The proposal (``sflow.warm_proposal``):
+
+- ``"retrieved"``: one of the real training reactions nearest to the first pass
+  (:mod:`umf.reaction_bank`), already in person 1's frame: the first pass's role and place
+  with a real person's stride;
+- ``"pflow"``: the P-Flow's motion for the prompt (and the person's own prompt), moved
+  rigidly on the floor to where the first pass starts. The P-Flow makes person 1, so this
+  proposes person 1's role: a caller's partner stands still instead of walking over
+  (results/umf-small-bandai-20261205).
 """
 
 from __future__ import annotations
@@ -20,7 +27,9 @@ from typing import Any
 
 import torch
 
+from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
+from umf.reaction_bank import REACTIONS
 from umf.representation import leader_frame, transform_features
 
 Tensor = torch.Tensor
@@ -45,9 +54,15 @@ def proposal(
     guidance: float | None,
     own: dict[str, Any],
 ) -> tuple[Tensor, int]:
-    """The P-Flow's motion for the scene prompt (and the person's ``own`` prompt), placed
-    where the first pass's reaction ``first`` (B, p, r) starts: its latent (B, p, r) on the
-    VAE's scale and the NFE."""
+    """The proposal for the first pass's reaction ``first`` (B, p, r) of ``frames`` feature
+    frames: its latent (B, p, r) on the VAE's scale and the NFE it took (module notes)."""
+    cfg = pipe.config.sflow
+    if cfg.warm_proposal == "retrieved":
+        if pipe.reactions is None:
+            raise UMFError(f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
+                           f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)")
+        return pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
+                                      pipe.sflow.latent_norm.normalize), 0  # fmt: skip
     z, nfe = pipe.pflow.sample(
         text,
         uncond,

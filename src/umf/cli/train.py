@@ -147,6 +147,24 @@ def vocabulary(
                f"written to {model}")  # fmt: skip
 
 
+@app.command("reactions")
+def reactions(
+    model: Path = typer.Option(..., "--model", help="Model directory to add them to."),
+    corpus: Path = CORPUS,
+    per_length: int = typer.Option(1024, help="At most this many reactions per length."),
+    progress: bool = PROGRESS,
+) -> None:
+    """Write the model's bank of real reactions (people 2..N of the corpus's train scenes,
+    encoded by the model's VAE) for sflow.warm_proposal 'retrieved'."""
+    from umf.train.reactions import write_reactions
+    from umf.validation import check_int
+
+    check_int("--per-length", per_length, 1, 1_000_000)
+    bank = write_reactions(model, corpus, per_length, progress, log=typer.echo)
+    typer.echo(f"{sum(len(z) for z in bank.latents.values())} reactions of "
+               f"{len(bank.latents)} lengths written to {model}")  # fmt: skip
+
+
 @app.command("evaluator")
 def evaluator(
     corpus: Path = CORPUS, out: Path = RUN, family: str | None = FAMILY,

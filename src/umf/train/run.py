@@ -549,6 +549,10 @@ def finetune(
         log(f"{stage}: {summary.get('steps')} steps in {summary.get('seconds', 0):.0f} s")
     out = export_model(run_dir, run_dir / "model", base=model, log=log)
     write_vocabulary(out, corpus_dir)
+    if cfg.sflow.warm_start and cfg.sflow.warm_proposal == "retrieved":
+        from umf.train.reactions import write_reactions
+
+        write_reactions(out, corpus_dir, progress=launch.progress, log=log)
     return out
 
 

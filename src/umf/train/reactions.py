@@ -1,0 +1,73 @@
+"""Build a model's bank of real reactions from the corpus it was trained on
+(:mod:`umf.reaction_bank`; ``umf train reactions``)."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Sequence
+from pathlib import Path
+
+import numpy as np
+import torch
+from tqdm import tqdm
+
+from umf.data.corpus import Corpus
+from umf.errors import UMFError
+from umf.reaction_bank import ReactionBank
+from umf.train.datasets import SceneDataset
+
+STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
+
+
+def bank_lengths(max_frames: int, step: int = STEP, shortest: int = 30) -> list[int]:
+    """The lengths a bank stores: every ``step`` frames from ``shortest`` to ``max_frames``."""
+    return list(range(shortest, max_frames + 1, step))
+
+
+@torch.no_grad()
+def build_reaction_bank(
+    corpus_dir: str | Path,
+    pipe,
+    lengths: Sequence[int] | None = None,
+    per_length: int = 1024,
+    seed: int = 0,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> ReactionBank:
+    """People 2..N of the train split's scenes and real takes, cropped to each length in
+    person 1's frame (mirrored at random, as in training), as the VAE's posterior means; at
+    most ``per_length`` per length, drawn with ``seed``. A length no scene is long enough
+    for is left out."""
+    corpus = Corpus.load(corpus_dir)
+    lengths = list(lengths or bank_lengths(pipe.config.vae.max_frames))
+    rng = np.random.default_rng(seed)
+    latents: dict[int, torch.Tensor] = {}
+    for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
+        ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
+                          max_frames=frames, mirror=True, seed=seed)  # fmt: skip
+        people = []
+        for i in range(len(ds)):
+            f = ds[i]["features"]
+            if f.shape[1] == frames:
+                people.extend(f[1:])
+        if not people:
+            log(f"reactions: no train scene has {frames} frames; that length is left out")
+            continue
+        keep = np.sort(rng.permutation(len(people))[:per_length])
+        x = torch.stack([people[i] for i in keep]).to(pipe.device)
+        mask = torch.ones(x.shape[:2], dtype=torch.bool, device=x.device)
+        latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
+                                     for j in range(0, len(x), 256)])  # fmt: skip
+    if not latents:
+        raise UMFError(f"{corpus_dir}: no multi-person train scene to take reactions from")
+    return ReactionBank(latents)
+
+
+def write_reactions(model: str | Path, corpus_dir: str | Path, per_length: int = 1024,
+                    progress: bool = True, log: Callable[[str], None] = print) -> ReactionBank:
+    """Give a model directory the bank of the corpus it was trained on."""
+    from umf.pipeline import UMFPipeline
+
+    bank = build_reaction_bank(corpus_dir, UMFPipeline.from_pretrained(model),
+                               per_length=per_length, progress=progress, log=log)  # fmt: skip
+    bank.save(model)
+    return bank

@@ -1,0 +1,163 @@
+"""Real reactions for the warm start (``sflow.warm_proposal = "retrieved"``): the bank's
+file, its nearest reactions, its build from a corpus, the pipeline and the CLI."""
+
+from __future__ import annotations
+
+import json
+import shutil
+from pathlib import Path
+
+import numpy as np
+import pytest
+import torch
+
+from conftest import MODULE, FakeText, prepare_fixture_corpus, save_tiny_model
+from umf.errors import UMFError
+from umf.pipeline import UMFPipeline
+from umf.reaction_bank import REACTIONS, ReactionBank
+from umf.train.reactions import bank_lengths, build_reaction_bank
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+P, R = 4, 8
+
+
+def _bank(seed: int = 0) -> ReactionBank:
+    g = torch.Generator().manual_seed(seed)
+    return ReactionBank({30: torch.randn(50, P, R, generator=g),
+                         60: torch.randn(20, P, R, generator=g)})  # fmt: skip
+
+
+def test_the_bank_round_trips_through_its_file(tmp_path):
+    bank = _bank()
+    path = bank.save(tmp_path)
+    assert path == tmp_path / REACTIONS
+    back = ReactionBank.load(tmp_path, (P, R))
+    assert back.lengths() == [30, 60]
+    for k in (30, 60):  # stored in fp16
+        torch.testing.assert_close(back.latents[k], bank.latents[k], atol=2e-3, rtol=1e-3)
+    assert ReactionBank.load(tmp_path / "nowhere") is None
+    with pytest.raises(UMFError, match="do not fit the model"):
+        ReactionBank.load(tmp_path, (P, R + 1))
+    path.write_bytes(b"not a safetensors file")
+    with pytest.raises(UMFError, match="corrupt reaction bank"):
+        ReactionBank.load(tmp_path)
+
+
+def test_nearest_takes_the_stored_length_nearest_and_one_of_the_k_nearest():
+    bank = _bank()
+    assert [bank.bucket(f) for f in (1, 30, 44, 45, 46, 500)] == [30, 30, 30, 30, 60, 60]
+    store = bank.latents[30]
+    query = store[[3, 7, 11]] + 0.01 * torch.randn(
+        3, P, R, generator=torch.Generator().manual_seed(1)
+    )
+    assert torch.equal(bank.nearest(query, 33, 1), store[[3, 7, 11]])
+    d = torch.cdist(query.flatten(1), store.flatten(1))
+    near = d.topk(5, largest=False).indices
+    gens = [torch.Generator().manual_seed(s) for s in range(3)]
+    got = bank.nearest(query, 33, 5, gens)
+    for row, z in enumerate(got):
+        i = int((store == z).all(dim=(1, 2)).nonzero())
+        assert i in near[row].tolist()
+    again = bank.nearest(query, 33, 5, [torch.Generator().manual_seed(s) for s in range(3)])
+    assert torch.equal(got, again)  # seeded, row by row
+    picks = {int((store == bank.nearest(query[:1], 33, 5, torch.Generator().manual_seed(s))[0])
+                 .all(dim=(1, 2)).nonzero()) for s in range(40)}  # fmt: skip
+    assert picks == set(near[0].tolist())  # every one of the 5 is drawn
+    # the distance is measured after ``scale``: one that weighs channel 0 a thousandfold
+    weigh = torch.ones(R)
+    weigh[0] = 1000.0
+    far = torch.randn(3, P, R, generator=torch.Generator().manual_seed(9))
+    scaled = bank.nearest(far, 33, 1, scale=lambda z: z * weigh)
+    want = torch.cdist((far * weigh).flatten(1), (store * weigh).flatten(1)).argmin(dim=1)
+    plain = torch.cdist(far.flatten(1), store.flatten(1)).argmin(dim=1)
+    assert torch.equal(scaled, store[want]) and not torch.equal(want, plain)
+
+
+@pytest.fixture(scope=MODULE)
+def corpus(tmp_path_factory):
+    return prepare_fixture_corpus(tmp_path_factory.mktemp("bank") / "corpus", train_scenes=8,
+                                  val_scenes=2, test_scenes=2, test_groups=2)  # fmt: skip
+
+
+@pytest.fixture(scope=MODULE)
+def model(tmp_path_factory):
+    """A tiny model that warm-starts from retrieved reactions (no bank yet)."""
+    path = save_tiny_model(tmp_path_factory.mktemp("bank") / "model", seed=3)
+    cfg = json.loads((path / "config.json").read_text())
+    cfg["sflow"] |= {"warm_start": 0.5, "warm_proposal": "retrieved", "warm_neighbours": 2}
+    (path / "config.json").write_text(json.dumps(cfg))
+    return path
+
+
+def test_the_bank_holds_people_2_to_n_of_the_train_scenes_as_posterior_means(corpus, model):
+    from umf.data.corpus import Corpus
+    from umf.train.datasets import SceneDataset
+
+    pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    bank = build_reaction_bank(corpus, pipe, lengths=[30, 60], per_length=10_000,
+                               progress=False, log=lambda m: None)  # fmt: skip
+    assert bank.lengths() == [30, 60]
+    ds = SceneDataset(Corpus.load(corpus), "train", pipe.normalizer, min_frames=30,
+                      max_frames=30, mirror=True, seed=0)  # fmt: skip
+    people = torch.cat([ds[i]["features"][1:] for i in range(len(ds))
+                        if ds[i]["features"].shape[1] == 30])  # fmt: skip
+    with torch.no_grad():
+        want = pipe.vae.encode(people, torch.ones(people.shape[:2], dtype=torch.bool))[0]
+    torch.testing.assert_close(bank.latents[30], want, atol=1e-5, rtol=1e-5)
+    small = build_reaction_bank(corpus, pipe, lengths=[30], per_length=5, progress=False,
+                                log=lambda m: None)  # fmt: skip
+    assert small.latents[30].shape == (5, *pipe.vae.latent_shape)
+    rows = [int(((want - z).abs().amax(dim=(1, 2)) < 1e-5).nonzero()[0]) for z in small.latents[30]]
+    assert rows == sorted(set(rows))  # distinct reactions, in the corpus's order
+    assert bank_lengths(120) == [30, 45, 60, 75, 90, 105, 120]
+
+
+def test_the_pipeline_warm_starts_from_a_real_reaction(corpus, model, tmp_path, monkeypatch):
+    import umf.warm_start
+
+    pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    with pytest.raises(UMFError, match=r"no reactions\.safetensors"):
+        pipe("two people walk side by side", num_people=2, seconds=1.0, seed=0)
+    pipe.reactions = build_reaction_bank(corpus, pipe, lengths=[30, 45], progress=False,
+                                         log=lambda m: None)  # fmt: skip
+    proposals = []
+    real = umf.warm_start.proposal
+
+    def seen(*args):
+        z, nfe = real(*args)
+        proposals.append(z)
+        return z, nfe
+
+    monkeypatch.setattr("umf.pipeline.proposal", seen)
+    a = pipe("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]
+    assert len(proposals) == 2 and a.meta["nfe"] == 6 + 2 * (3 + 2)  # no P-Flow proposal
+    store = pipe.reactions.latents[30]
+    for z in proposals:  # each a stored reaction of the nearest length
+        assert bool((store[None] == z[:, None]).all(dim=(2, 3)).any(dim=1).all())
+    b = pipe("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]
+    assert np.array_equal(a.joints, b.joints)
+    cold = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    cold.config.sflow.warm_start = 0.0
+    c = cold("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]
+    assert np.array_equal(a.joints[0], c.joints[0]) and not np.allclose(a.joints[1:], c.joints[1:])
+    out = pipe.save_pretrained(tmp_path / "saved")
+    again = UMFPipeline.from_pretrained(out, text_encoder=FakeText())
+    assert again.reactions.lengths() == [30, 45]
+
+
+def test_the_cli_writes_a_models_bank(corpus, model, tmp_path, fake_text):
+    from typer.testing import CliRunner
+
+    from umf.cli.main import app
+
+    copy = Path(shutil.copytree(model, tmp_path / "model"))
+    r = CliRunner().invoke(app, ["train", "reactions", "--model", str(copy), "--corpus",
+                                 str(corpus), "--per-length", "7", "--no-progress"])  # fmt: skip
+    assert r.exit_code == 0, r.output
+    assert "reactions of" in r.output and (copy / REACTIONS).exists()
+    bank = ReactionBank.load(copy)
+    assert max(len(z) for z in bank.latents.values()) <= 7
+    r = CliRunner().invoke(app, ["train", "reactions", "--model", str(copy), "--corpus",
+                                 str(corpus), "--per-length", "0"])  # fmt: skip
+    assert r.exit_code != 0  # a one-line error through the entry point (test_cli.py)
+    assert isinstance(r.exception, UMFError) and "--per-length" in str(r.exception)
