@@ -59,8 +59,10 @@ def proposal(
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
-            raise UMFError(f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
-                           f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)")
+            raise UMFError(
+                f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
+                f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
+            )
         return pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize), 0  # fmt: skip
     z, nfe = pipe.pflow.sample(

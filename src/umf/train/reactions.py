@@ -62,8 +62,13 @@ def build_reaction_bank(
     return ReactionBank(latents)
 
 
-def write_reactions(model: str | Path, corpus_dir: str | Path, per_length: int = 1024,
-                    progress: bool = True, log: Callable[[str], None] = print) -> ReactionBank:
+def write_reactions(
+    model: str | Path,
+    corpus_dir: str | Path,
+    per_length: int = 1024,
+    progress: bool = True,
+    log: Callable[[str], None] = print,
+) -> ReactionBank:
     """Give a model directory the bank of the corpus it was trained on."""
     from umf.pipeline import UMFPipeline
 
