@@ -104,6 +104,11 @@ def test_the_bank_holds_people_2_to_n_of_the_train_scenes_as_posterior_means(cor
     with torch.no_grad():
         want = pipe.vae.encode(people, torch.ones(people.shape[:2], dtype=torch.bool))[0]
     torch.testing.assert_close(bank.latents[30], want, atol=1e-5, rtol=1e-5)
+    captions = [ds[i]["caption"] for i in range(len(ds)) if ds[i]["features"].shape[1] == 30
+                for _ in ds[i]["features"][1:]]  # fmt: skip
+    from umf.coverage import embed
+
+    torch.testing.assert_close(bank.texts[30], embed(pipe.text_encoder, captions))
     small = build_reaction_bank(corpus, pipe, lengths=[30], per_length=5, progress=False,
                                 log=lambda m: None)  # fmt: skip
     assert small.latents[30].shape == (5, *pipe.vae.latent_shape)
@@ -161,3 +166,32 @@ def test_the_cli_writes_a_models_bank(corpus, model, tmp_path, fake_text):
                                  str(corpus), "--per-length", "0"])  # fmt: skip
     assert r.exit_code != 0  # a one-line error through the entry point (test_cli.py)
     assert isinstance(r.exception, UMFError) and "--per-length" in str(r.exception)
+
+
+def test_a_shortlist_by_caption_restricts_the_candidates(tmp_path):
+    """With captions, only the ``shortlist`` reactions whose captions are nearest the prompt
+    compete; without a prompt or captions, every reaction does; captions round-trip."""
+    g = torch.Generator().manual_seed(4)
+    latents = torch.randn(30, P, R, generator=g)
+    texts = torch.nn.functional.normalize(torch.randn(30, 16, generator=g), dim=-1)
+    bank = ReactionBank({30: latents}, {30: texts})
+    query = latents[[5]] + 0.01
+    assert torch.equal(bank.nearest(query, 30, 1), latents[[5]])
+    prompt = torch.nn.functional.normalize(torch.randn(1, 16, generator=g), dim=-1)
+    short = (prompt @ texts.T).topk(2).indices[0]  # the two captions nearest the prompt
+    assert 5 not in short.tolist()
+    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=2)
+    d = torch.cdist(query.flatten(1), latents[short].flatten(1))
+    assert torch.equal(got, latents[short][d.argmin(dim=1)])
+    picks = {int((latents == bank.nearest(query, 30, 4, torch.Generator().manual_seed(s),
+                                          prompt=prompt, shortlist=2)[0]).all(dim=(1, 2))
+                 .nonzero()) for s in range(20)}  # fmt: skip
+    assert picks == set(short.tolist())  # 4 neighbours asked, 2 on the shortlist
+    assert torch.equal(ReactionBank({30: latents}).nearest(query, 30, 1, prompt=prompt,
+                                                           shortlist=2), latents[[5]])  # fmt: skip
+    bank.save(tmp_path)
+    back = ReactionBank.load(tmp_path, (P, R))
+    torch.testing.assert_close(back.texts[30], texts, atol=2e-3, rtol=1e-3)
+    ReactionBank({30: latents}, {30: texts[:10]}).save(tmp_path)
+    with pytest.raises(UMFError, match="captions of 30 frames"):
+        ReactionBank.load(tmp_path)

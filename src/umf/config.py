@@ -201,6 +201,7 @@ class SFlowConfig:
     # pass: its role; the model directory's reactions.safetensors, umf.reaction_bank)
     warm_proposal: str = "pflow"
     warm_neighbours: int = 4
+    warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction
     # start (reaction_noise) lost where person 2 stands (results/flows-long-h200-20261126)

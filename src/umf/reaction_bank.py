@@ -16,7 +16,7 @@ the S-Flow trains on). They are derived from the training data and carry its lic
 from __future__ import annotations
 
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import torch
@@ -27,6 +27,7 @@ from umf.io import save_tensors_atomic
 
 REACTIONS = "reactions.safetensors"
 PREFIX = "frames_"
+TEXT = "text_"
 
 Tensor = torch.Tensor
 
@@ -36,6 +37,9 @@ class ReactionBank:
     """Real reactions per length: ``latents[frames]`` (N, p, r) on the VAE's scale."""
 
     latents: dict[int, Tensor]
+    # per length, each reaction's scene caption as a unit sentence embedding (N, D) in the
+    # model's text encoder (umf.coverage.embed), for a shortlist by the prompt; may be empty
+    texts: dict[int, Tensor] = field(default_factory=dict)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
@@ -43,8 +47,10 @@ class ReactionBank:
     def save(self, model_dir: str | Path) -> Path:
         """Write ``reactions.safetensors`` into a model directory atomically (fp16)."""
         path = Path(model_dir) / REACTIONS
-        save_tensors_atomic({f"{PREFIX}{k}": v.to(torch.float16).contiguous()
-                             for k, v in self.latents.items()}, path)  # fmt: skip
+        tensors = {f"{PREFIX}{k}": v for k, v in self.latents.items()}
+        tensors |= {f"{TEXT}{k}": v for k, v in self.texts.items()}
+        save_tensors_atomic({k: v.to(torch.float16).contiguous() for k, v in tensors.items()},
+                            path)  # fmt: skip
         path.chmod(0o644)
         return path
 
@@ -59,16 +65,23 @@ class ReactionBank:
             return None
         try:
             raw = load_file(str(path))
-            latents = {int(k.removeprefix(PREFIX)): v.float() for k, v in raw.items()}
+            latents = {int(k.removeprefix(PREFIX)): v.float() for k, v in raw.items()
+                       if k.startswith(PREFIX)}  # fmt: skip
+            texts = {int(k.removeprefix(TEXT)): v.float() for k, v in raw.items()
+                     if k.startswith(TEXT)}  # fmt: skip
         except (OSError, ValueError, RuntimeError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
             fits = z.ndim == 3 and len(z) and (shape is None or z.shape[1:] == tuple(shape))
             if not fits or not torch.isfinite(z).all():
                 raise UMFError(f"{path}: reactions of {frames} frames do not fit the model")
+        for frames, e in texts.items():
+            z = latents.get(frames)
+            if z is None or e.ndim != 2 or len(e) != len(z) or not torch.isfinite(e).all():
+                raise UMFError(f"{path}: captions of {frames} frames do not match its reactions")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents)
+        return cls(latents, texts)
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""
@@ -81,14 +94,26 @@ class ReactionBank:
         neighbours: int,
         generator: Generators = None,
         scale: Callable[[Tensor], Tensor] = lambda z: z,
+        prompt: Tensor | None = None,
+        shortlist: int = 0,
     ) -> Tensor:
         """For each row of ``query`` (B, p, r) a real reaction (B, p, r): one of the
         ``neighbours`` nearest (Euclidean after ``scale``, e.g. the S-Flow's latent
         normaliser) among those of the stored length nearest to ``frames``, drawn uniformly
-        with row i's generator."""
-        bank = self.latents[self.bucket(frames)].to(query)
-        k = max(1, min(int(neighbours), bank.shape[0]))
+        with row i's generator. ``prompt`` (B, D) unit sentence embeddings and ``shortlist``
+        > 0: only among the ``shortlist`` reactions whose captions are nearest the prompt
+        (a bank without captions ignores them)."""
+        length = self.bucket(frames)
+        bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
+        if prompt is not None and shortlist > 0 and length in self.texts:
+            sims = prompt.to(d) @ self.texts[length].to(d).T  # (B, N)
+            keep = sims.topk(min(shortlist, sims.shape[1]), dim=1).indices
+            d = torch.full_like(d, float("inf")).scatter(1, keep, d.gather(1, keep))
+            bank_size = keep.shape[1]
+        else:
+            bank_size = bank.shape[0]
+        k = max(1, min(int(neighbours), bank_size))
         idx = d.topk(k, dim=1, largest=False).indices  # (B, k), nearest first
         pick = randn((query.shape[0], k), generator, device=query.device).argmax(dim=1)
         return bank[idx[torch.arange(query.shape[0], device=query.device), pick]]

@@ -63,8 +63,10 @@ def proposal(
                 f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
                 f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
             )
+        prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
         return pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
-                                      pipe.sflow.latent_norm.normalize), 0  # fmt: skip
+                                      pipe.sflow.latent_norm.normalize, prompt,
+                                      cfg.warm_shortlist), 0  # fmt: skip
     z, nfe = pipe.pflow.sample(
         text,
         uncond,

@@ -10,6 +10,7 @@ import numpy as np
 import torch
 from tqdm import tqdm
 
+from umf.coverage import embed
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
@@ -34,32 +35,36 @@ def build_reaction_bank(
     log: Callable[[str], None] = print,
 ) -> ReactionBank:
     """People 2..N of the train split's scenes and real takes, cropped to each length in
-    person 1's frame (mirrored at random, as in training), as the VAE's posterior means; at
-    most ``per_length`` per length, drawn with ``seed``. A length no scene is long enough
-    for is left out."""
+    person 1's frame (mirrored at random, as in training), as the VAE's posterior means, with
+    their scene's caption embedded by the model's text encoder; at most ``per_length`` per
+    length, drawn with ``seed``. A length no scene is long enough for is left out."""
     corpus = Corpus.load(corpus_dir)
     lengths = list(lengths or bank_lengths(pipe.config.vae.max_frames))
     rng = np.random.default_rng(seed)
     latents: dict[int, torch.Tensor] = {}
+    texts: dict[int, torch.Tensor] = {}
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
                           max_frames=frames, mirror=True, seed=seed)  # fmt: skip
-        people = []
+        people, captions = [], []
         for i in range(len(ds)):
-            f = ds[i]["features"]
+            item = ds[i]
+            f = item["features"]
             if f.shape[1] == frames:
                 people.extend(f[1:])
+                captions.extend([item["caption"]] * (f.shape[0] - 1))
         if not people:
             log(f"reactions: no train scene has {frames} frames; that length is left out")
             continue
         keep = np.sort(rng.permutation(len(people))[:per_length])
         x = torch.stack([people[i] for i in keep]).to(pipe.device)
         mask = torch.ones(x.shape[:2], dtype=torch.bool, device=x.device)
+        texts[frames] = embed(pipe.text_encoder, [captions[i] for i in keep])
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
     if not latents:
         raise UMFError(f"{corpus_dir}: no multi-person train scene to take reactions from")
-    return ReactionBank(latents)
+    return ReactionBank(latents, texts)
 
 
 def write_reactions(
