@@ -56,9 +56,10 @@ def main() -> None:
     from umf.flows.solvers import integrate
     from umf.models.pflow import encode_uncond
     from umf.pipeline import UMFPipeline
-    from umf.representation import features_to_joints, leader_frame, transform_features
+    from umf.representation import features_to_joints
     from umf.train.datasets import SceneDataset
     from umf.train.foot_slide import decoded_foot_slide
+    from umf.warm_start import move_onto
 
     pipe = UMFPipeline.from_pretrained(args.model)
     sflow, cfg = pipe.sflow.eval(), pipe.config
@@ -143,11 +144,7 @@ def main() -> None:
         # ... and moved, rigidly on the floor, to where the blur of the S-Flow's first step
         # starts (its first-frame pelvis and facing), then encoded again
         blur = reaction_endpoint(x0, field(x0, torch.zeros(b)), torch.zeros(b))
-        walker, there = features(own), features(blur)
-        moved = torch.stack([
-            transform_features(transform_features(f, leader_frame(f)), leader_frame(g),
-                               inverse=True)
-            for f, g in zip(walker, there, strict=True)])  # fmt: skip
+        moved = move_onto(features(own), features(blur))
         placed_own = sflow.latent_norm.normalize(pipe._encode(moved))
         guesses = (("another follower", other), ("P-Flow's walker", own),
                    ("P-Flow's walker, placed", placed_own))  # fmt: skip

@@ -133,7 +133,7 @@ def test_the_pipeline_warm_starts_from_a_real_reaction(corpus, model, tmp_path, 
         proposals.append(z)
         return z, nfe
 
-    monkeypatch.setattr("umf.pipeline.proposal", seen)
+    monkeypatch.setattr(umf.warm_start, "proposal", seen)
     a = pipe("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]
     assert len(proposals) == 2 and a.meta["nfe"] == 6 + 2 * (3 + 2)  # no P-Flow proposal
     store = pipe.reactions.latents[30]

@@ -75,25 +75,43 @@ def test_warm_start_samples_people_2_to_n_again_from_a_proposal(models):
     assert np.isfinite(warm.joints).all()
 
 
-def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models):
-    plain = _scene(models["warm"], people=2)
-    own = _scene(models["warm"], people=2, own=[None, "waves with the right hand"])
-    assert np.array_equal(plain.joints[0], own.joints[0])
-    assert not np.allclose(plain.joints[1], own.joints[1])
+def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models, monkeypatch):
+    """Person 2's own prompt reaches the P-Flow's proposal (not only the S-Flow's passes),
+    and the proposal follows it."""
+    import umf.warm_start
+    from umf.flows.noise import randn
+
+    real, seen = umf.warm_start.proposal, []
+
+    def spy(pipe, first, text, uncond, frames, generator, guidance, own):
+        seen.append(own)
+        return real(pipe, first, text, uncond, frames, generator, guidance, own)
+
+    monkeypatch.setattr(umf.warm_start, "proposal", spy)
+    _scene(models["warm"], people=2, own=[None, "waves with the right hand"])
+    pipe = models["warm"]
+    want = pipe.text_encoder.encode(["waves with the right hand"]).tokens
+    assert len(seen) == 1 and torch.equal(seen[0]["person_text"].tokens, want)
+    # the same first pass, the same noise: with and without the own prompt, two proposals
+    first = randn((1, *pipe.vae.latent_shape), torch.Generator().manual_seed(0))
+    text, uncond = (pipe.text_encoder.encode([p]) for p in ("two people walk", ""))
+    a, b = (real(pipe, first, text, uncond, 30, torch.Generator().manual_seed(1), None, own)[0]
+            for own in ({}, seen[0]))  # fmt: skip
+    assert not torch.allclose(a, b)
 
 
 def test_the_proposal_matters(models, monkeypatch):
     """The second pass starts from what :func:`umf.warm_start.proposal` returns."""
-    import umf.pipeline
+    import umf.warm_start
 
     base = _scene(models["warm"], people=2)
-    real = umf.pipeline.proposal
+    real = umf.warm_start.proposal
 
     def shifted(pipe, first, *args):
         z, nfe = real(pipe, first, *args)
         return z + 1.0, nfe
 
-    monkeypatch.setattr(umf.pipeline, "proposal", shifted)
+    monkeypatch.setattr(umf.warm_start, "proposal", shifted)
     other = _scene(models["warm"], people=2)
     assert np.array_equal(base.joints[0], other.joints[0])
     assert not np.allclose(base.joints[1], other.joints[1])

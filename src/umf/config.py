@@ -193,8 +193,8 @@ class SFlowConfig:
     # start, and a context that is not a posterior mean; False: the sampled latents as is)
     reencode_context: bool = False
     # > 0: after the usual pass, each added person is sampled again from this time on the
-    # path towards a proposal (the P-Flow's own motion for the prompt, moved to where the
-    # first pass starts): the near-deterministic start glides (umf.warm_start)
+    # path towards a proposal (warm_proposal): the near-deterministic start glides
+    # (umf.warm_start)
     warm_start: float = 0.0
     # what the warm start starts from: "pflow" (the P-Flow's motion: person 1's role) or
     # "retrieved" (one of the warm_neighbours real training reactions nearest to the first

@@ -27,6 +27,7 @@ CHOICES = {
     "encoder": ("minilm", "clip"),
     "text_encoder": ("minilm", "clip", "clip-tokens"),
     "family": ("paper", "small"),
+    "warm_proposal": ("pflow", "retrieved"),
 }
 
 
@@ -122,9 +123,6 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if config.sflow.context_condition and config.sflow.shared_backbone:
             raise UMFError("sflow.context_condition needs the S-Flow's own transformer "
                            "(not sflow.shared_backbone)")  # fmt: skip
-        if config.sflow.warm_proposal not in ("pflow", "retrieved"):
-            raise UMFError("sflow.warm_proposal must be 'pflow' or 'retrieved', got "
-                           f"{config.sflow.warm_proposal!r}")  # fmt: skip
         if config.sflow.warm_neighbours < 1:
             raise UMFError(f"sflow.warm_neighbours must be at least 1, got "
                            f"{config.sflow.warm_neighbours}")  # fmt: skip

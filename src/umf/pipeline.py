@@ -67,7 +67,7 @@ from umf.validation import (
     chunk_size,
     chunks,
 )
-from umf.warm_start import proposal
+from umf.warm_start import sample_added
 
 __all__ = ["MAX_PEOPLE", "Scene", "UMFPipeline", "default_model_dir"]  # Scene: umf.scene
 
@@ -347,16 +347,14 @@ class UMFPipeline:
         for k in range(1, num_people):
             prev = torch.stack(context, dim=1)
             mask = torch.ones(prev.shape[:2], dtype=torch.bool, device=self.device)
-            own = person_text(self, req.person_prompts, k, b)
-            kw = {"steps": req.sflow_steps or self.config.sflow.steps_for(num_people),
-                  "guidance": self.config.sflow.guidance if guidance is None else guidance,
-                  "generator": gen, **own}  # fmt: skip
-            w, n = self.sflow.sample(prev, mask, text, uncond, **kw)
+            w, n = sample_added(
+                self, prev, mask, text, uncond, t,
+                steps=req.sflow_steps or self.config.sflow.steps_for(num_people),
+                guidance=self.config.sflow.guidance if guidance is None else guidance,
+                generator=gen, own=person_text(self, req.person_prompts, k, b),
+                pflow_guidance=guidance,
+            )  # fmt: skip
             nfe += n
-            if self.config.sflow.warm_start:  # again, from a sharp proposal (umf.warm_start)
-                guess, m = proposal(self, w, text, uncond, t, gen, guidance, own)
-                w, n = self.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
-                nfe += m + n
             latents.append(w)
             if k < num_people - 1:  # someone follows: w joins the context
                 context.append(self._encode(self.decode(w, t, reaction=True)) if reencode else w)

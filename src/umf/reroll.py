@@ -34,7 +34,7 @@ from umf.separation import separate_people, touching_distances
 from umf.streams import scene_generators
 from umf.text import respell_prompt
 from umf.validation import check_int, check_request, check_text
-from umf.warm_start import proposal
+from umf.warm_start import sample_added
 
 
 def check_reroll(scene: Scene, person: int, fps: float, max_frames: int) -> None:
@@ -106,13 +106,12 @@ def reroll_person(
         cond = pipe.text_encoder.encode([words]).to(device)
         uncond = pipe.text_encoder.encode([""]).to(device)
         person_kw = person_text(pipe, [own], 0, 1)
-        gen = scene_generators(seed, [0], device)
-        kw = {"steps": steps, "guidance": cfg.sflow.guidance if guidance is None else guidance,
-              "generator": gen, **person_kw}  # fmt: skip
-        w, _ = pipe.sflow.sample(context, mask, cond, uncond, **kw)
-        if cfg.sflow.warm_start:  # as the pipeline samples people 2..N (umf.warm_start)
-            guess, _ = proposal(pipe, w, cond, uncond, t, gen, guidance, person_kw)
-            w, _ = pipe.sflow.sample(context, mask, cond, uncond, warm=guess, **kw)
+        w, _ = sample_added(
+            pipe, context, mask, cond, uncond, t, steps=steps,
+            guidance=cfg.sflow.guidance if guidance is None else guidance,
+            generator=scene_generators(seed, [0], device), own=person_kw,
+            pflow_guidance=guidance,
+        )  # fmt: skip
         new = transform_features(pipe.decode(w, t, reaction=True)[0].cpu(), frame, inverse=True)
     decoded = features_to_joints_integrated(new).numpy()  # (T, 22, 3), one frame added
     contacts = new[:, CONTACT].numpy()

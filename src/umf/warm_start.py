@@ -78,3 +78,30 @@ def proposal(
     )
     moved = move_onto(pipe.decode(z, frames), pipe.decode(first, frames, reaction=True))
     return pipe._encode(moved), nfe
+
+
+def sample_added(
+    pipe: Any,
+    prev: Tensor,
+    mask: Tensor,
+    text: Any,
+    uncond: Any,
+    frames: int,
+    *,
+    steps: int,
+    guidance: float | None,
+    generator: Any,
+    own: dict[str, Any],
+    pflow_guidance: float | None,
+) -> tuple[Tensor, int]:
+    """The next person's latent (B, p, r) and the NFE, as the pipeline and re-rolls sample
+    people 2..N: the S-Flow's pass and, with ``sflow.warm_start``, the pass again from its
+    proposal. ``own``: the person's own prompt (:func:`umf.person_prompts.person_text`);
+    ``pflow_guidance``: the caller's guidance for a P-Flow proposal (None: its config's)."""
+    kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
+    w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
+    if pipe.config.sflow.warm_start:
+        guess, m = proposal(pipe, w, text, uncond, frames, generator, pflow_guidance, own)
+        w, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
+        nfe += m + n
+    return w, nfe
