@@ -195,3 +195,64 @@ def test_a_shortlist_by_caption_restricts_the_candidates(tmp_path):
     ReactionBank({30: latents}, {30: texts[:10]}).save(tmp_path)
     with pytest.raises(UMFError, match="captions of 30 frames"):
         ReactionBank.load(tmp_path)
+
+
+def test_a_pace_restricts_the_candidates_to_reactions_at_the_first_passs_speed(tmp_path):
+    """With speeds, only reactions whose pelvis speed is within ``pace`` x the query's
+    compete, and the ``neighbours`` nearest in speed where fewer are; speeds round-trip and
+    a bank whose speeds do not match its reactions is refused."""
+    g = torch.Generator().manual_seed(5)
+    latents = torch.randn(40, P, R, generator=g)
+    speeds = torch.linspace(0.0, 3.9, 40)  # reaction i travels at 0.1 i m/s
+    bank = ReactionBank({30: latents}, speeds={30: speeds})
+    query = latents[[2, 2]] + 0.01  # nearest in latent space: reaction 2, at 0.2 m/s
+    assert torch.equal(bank.nearest(query, 30, 1), latents[[2, 2]])
+    fast = torch.tensor([2.5, 1.0])
+    got = bank.nearest(query, 30, 1, speed=fast, pace=0.2)
+    for row, q in enumerate(fast.tolist()):
+        ok = ((speeds - q).abs() <= 0.2 * q + 1e-6).nonzero()[:, 0]
+        d = torch.cdist(query[row : row + 1].flatten(1), latents[ok].flatten(1))
+        assert torch.equal(got[row], latents[ok][d.argmin()])
+    # nothing within 1 % of 0.05 m/s: the 3 nearest in speed (0.0, 0.1, 0.2 m/s) compete
+    picks = {int((latents == bank.nearest(query[:1], 30, 3, torch.Generator().manual_seed(s),
+                                          speed=torch.tensor([0.05]), pace=0.01)[0])
+                 .all(dim=(1, 2)).nonzero()) for s in range(30)}  # fmt: skip
+    assert picks == {0, 1, 2}
+    assert torch.equal(ReactionBank({30: latents}).nearest(query, 30, 1, speed=fast, pace=0.2),
+                       latents[[2, 2]])  # fmt: skip  # a bank without speeds ignores them
+    bank.save(tmp_path)
+    torch.testing.assert_close(ReactionBank.load(tmp_path).speeds[30], speeds, atol=2e-3,
+                               rtol=1e-3)  # fmt: skip
+    ReactionBank({30: latents}, speeds={30: speeds[:5]}).save(tmp_path)
+    with pytest.raises(UMFError, match="speeds of 30 frames"):
+        ReactionBank.load(tmp_path)
+
+
+def test_the_bank_stores_each_reactions_pelvis_speed(corpus, model):
+    from umf.data.corpus import Corpus
+    from umf.train.datasets import SceneDataset
+
+    pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    bank = build_reaction_bank(corpus, pipe, lengths=[30], per_length=10_000, progress=False,
+                               log=lambda m: None)  # fmt: skip
+    ds = SceneDataset(Corpus.load(corpus), "train", pipe.normalizer, min_frames=30,
+                      max_frames=30, mirror=True, seed=0)  # fmt: skip
+    people = torch.cat([ds[i]["features"][1:] for i in range(len(ds))
+                        if ds[i]["features"].shape[1] == 30])  # fmt: skip
+    pelvis = rep_joints(pipe.normalizer.denormalize(people))[:, :, 0, [0, 2]]
+    want = (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1).mean(1) * pipe.config.fps
+    torch.testing.assert_close(bank.speeds[30], want, atol=1e-5, rtol=1e-5)
+    assert bank.speeds[30].max() > 0.1  # the fixture's people travel
+
+
+def rep_joints(features: torch.Tensor) -> torch.Tensor:
+    from umf.representation import features_to_joints
+
+    return features_to_joints(features)
+
+
+def test_at_pace_says_which_rows_the_bank_has_a_reaction_for():
+    bank = ReactionBank({30: torch.zeros(3, P, R)}, speeds={30: torch.tensor([0.0, 1.0, 2.0])})
+    got = bank.at_pace(torch.tensor([1.1, 2.3, 2.6, 0.5]), 33, 0.15)
+    assert got.tolist() == [True, True, False, False]
+    assert ReactionBank({30: torch.zeros(3, P, R)}).at_pace(torch.tensor([9.0]), 30, 0.1).all()

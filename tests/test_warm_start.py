@@ -126,3 +126,85 @@ def test_warm_start_out_of_range_is_refused(value):
     cfg = set_option(tiny_config(), f"sflow.warm_start={value}")
     with pytest.raises(UMFError, match="warm_start"):
         check_config_values(cfg)
+
+
+def _gait(planted: bool, speed: float = 1.2, frames: int = 61, fps: float = 30.0):
+    """Features (T, 262) of a stick walker whose pelvis travels at ``speed`` m/s along +Z:
+    ``planted``: the ankles take turns resting (a stride), else both slide with the pelvis."""
+    t = torch.arange(frames, dtype=torch.float64) / fps
+    j = torch.zeros(frames, 22, 3, dtype=torch.float64)
+    j[:, :, 1] = torch.linspace(0.0, 1.0, 22)  # heights, so the body is not degenerate
+    j[:, :, 0] = torch.linspace(-0.2, 0.2, 22)
+    j[:, :, 2] = (speed * t)[:, None]
+    if planted:  # each ankle alternately rests and catches up at twice the pelvis's speed
+        half = int(fps * 0.5)
+        for k, side in ((7, 0), (8, 1)):
+            z = torch.zeros(frames, dtype=torch.float64)
+            for i in range(1, frames):
+                moving = (i // half) % 2 == side
+                z[i] = z[i - 1] + (2 * speed / fps if moving else 0.0)
+            j[:, k, 2] = z
+    return rep.joints_to_features(j)
+
+
+def test_the_glide_score_tells_a_stride_from_a_glide():
+    from umf.warm_start import MOVING, floor_speeds, glide_score
+
+    stride, glide = _gait(True), _gait(False)
+    pelvis, slower = floor_speeds(torch.stack([stride, glide]), 30.0)
+    torch.testing.assert_close(pelvis, torch.full((2,), 1.2, dtype=pelvis.dtype), atol=1e-6,
+                               rtol=0)  # fmt: skip
+    assert float(slower[0]) < 0.1 and abs(float(slower[1]) - 1.2) < 1e-6
+    score = glide_score(torch.stack([stride, glide, _gait(False, speed=MOVING * 0.9)]), 30.0)
+    assert float(score[0]) < 0.1 and abs(float(score[1]) - 1.0) < 1e-6
+    assert float(score[2]) == 0.0  # not travelling: not gliding
+
+
+def test_warm_glide_keeps_the_first_pass_of_people_who_do_not_glide(models, monkeypatch):
+    """With ``sflow.warm_glide`` only a gliding first pass is replaced by the second. A
+    threshold nobody reaches keeps person 2's first pass (the cold scene's), one everybody
+    passes gives the warm scene. The second pass runs either way, so the draws of the people
+    after are the warm scene's whatever the glide (a row's draws never depend on its batch)."""
+    import umf.warm_start
+
+    monkeypatch.setattr(umf.warm_start, "glide_score", lambda f, fps: torch.ones(f.shape[0]))
+    pipe = models["warm"]
+    try:
+        for people in (2, 3):
+            cold, warm = _scene(models["cold"], people), _scene(pipe, people)
+            pipe.config.sflow.warm_glide = 1e-9
+            assert np.array_equal(_scene(pipe, people).joints, warm.joints)
+            pipe.config.sflow.warm_glide = 1e9
+            kept = _scene(pipe, people)
+            assert kept.meta["nfe"] == warm.meta["nfe"]
+            assert np.array_equal(kept.joints[:2], cold.joints[:2])
+            if people == 3:
+                assert not np.allclose(kept.joints[2], cold.joints[2])
+            pipe.config.sflow.warm_glide = 0.0
+    finally:
+        pipe.config.sflow.warm_glide = 0.0
+
+
+def test_warm_rows_takes_gliding_people_the_bank_has_a_pace_for(models, monkeypatch):
+    import umf.warm_start
+    from umf.reaction_bank import ReactionBank
+
+    pipe = models["warm"]
+    first = torch.zeros(4, *pipe.vae.latent_shape)
+    monkeypatch.setattr(umf.warm_start, "glide_score",
+                        lambda f, fps: torch.tensor([0.1, 0.5, 0.5, 0.5]))  # fmt: skip
+    monkeypatch.setattr(umf.warm_start, "floor_speeds",
+                        lambda f, fps: (torch.tensor([1.0, 1.0, 3.0, 1.0]), None))  # fmt: skip
+    cfg, old = pipe.config.sflow, (pipe.config.sflow.warm_glide, pipe.config.sflow.warm_pace,
+                                   pipe.config.sflow.warm_proposal, pipe.reactions)  # fmt: skip
+    try:
+        assert umf.warm_start.warm_rows(pipe, first, 30).all()  # neither: every row
+        cfg.warm_glide = 0.3
+        assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, True, True]
+        cfg.warm_pace, cfg.warm_proposal = 0.2, "retrieved"
+        pipe.reactions = ReactionBank({30: first[:1]}, speeds={30: torch.tensor([1.1])})
+        assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, False, True]
+        cfg.warm_proposal = "pflow"  # a pace is for retrieved proposals only
+        assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, True, True]
+    finally:
+        cfg.warm_glide, cfg.warm_pace, cfg.warm_proposal, pipe.reactions = old

@@ -201,6 +201,13 @@ class SFlowConfig:
     # pass: its role; the model directory's reactions.safetensors, umf.reaction_bank)
     warm_proposal: str = "pflow"
     warm_neighbours: int = 4
+    # > 0: the second pass only for people whose first pass glides (umf.warm_start.glide_score
+    # above this), the others' first pass kept
+    warm_glide: float = 0.0
+    # > 0: retrieve among the reactions whose pelvis travels within this fraction of the
+    # first pass's floor speed (its path keeps pace where its legs do not); needs a bank
+    # with speeds
+    warm_pace: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction

@@ -9,7 +9,9 @@ so the second pass keeps the role and gains the stride.
 A model directory carries them in ``reactions.safetensors``: for each length of a set
 (``frames_30``, ``frames_45`` ... feature frames), the VAE's posterior means (N, p, r) of
 people 2..N of the training scenes, cropped to that length in person 1's frame (the crop
-the S-Flow trains on). They are derived from the training data and carry its licence.
+the S-Flow trains on), with their scene captions' embeddings (``text_*``) and their
+pelvis's mean floor speed in m/s (``speed_*``). They are derived from the training data and
+carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
 
@@ -28,6 +30,7 @@ from umf.io import save_tensors_atomic
 REACTIONS = "reactions.safetensors"
 PREFIX = "frames_"
 TEXT = "text_"
+SPEED = "speed_"
 
 Tensor = torch.Tensor
 
@@ -40,6 +43,8 @@ class ReactionBank:
     # per length, each reaction's scene caption as a unit sentence embedding (N, D) in the
     # model's text encoder (umf.coverage.embed), for a shortlist by the prompt; may be empty
     texts: dict[int, Tensor] = field(default_factory=dict)
+    # per length, each reaction's pelvis mean floor speed (N,) in m/s; may be empty
+    speeds: dict[int, Tensor] = field(default_factory=dict)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
@@ -49,6 +54,7 @@ class ReactionBank:
         path = Path(model_dir) / REACTIONS
         tensors = {f"{PREFIX}{k}": v for k, v in self.latents.items()}
         tensors |= {f"{TEXT}{k}": v for k, v in self.texts.items()}
+        tensors |= {f"{SPEED}{k}": v for k, v in self.speeds.items()}
         save_tensors_atomic({k: v.to(torch.float16).contiguous() for k, v in tensors.items()},
                             path)  # fmt: skip
         path.chmod(0o644)
@@ -69,6 +75,8 @@ class ReactionBank:
                        if k.startswith(PREFIX)}  # fmt: skip
             texts = {int(k.removeprefix(TEXT)): v.float() for k, v in raw.items()
                      if k.startswith(TEXT)}  # fmt: skip
+            speeds = {int(k.removeprefix(SPEED)): v.float() for k, v in raw.items()
+                      if k.startswith(SPEED)}  # fmt: skip
         except (OSError, ValueError, RuntimeError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -79,13 +87,27 @@ class ReactionBank:
             z = latents.get(frames)
             if z is None or e.ndim != 2 or len(e) != len(z) or not torch.isfinite(e).all():
                 raise UMFError(f"{path}: captions of {frames} frames do not match its reactions")
+        for frames, v in speeds.items():
+            z = latents.get(frames)
+            if z is None or v.shape != (len(z),) or not torch.isfinite(v).all():
+                raise UMFError(f"{path}: speeds of {frames} frames do not match its reactions")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents, texts)
+        return cls(latents, texts, speeds)
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""
         return min(self.latents, key=lambda k: (abs(k - frames), k))
+
+    def at_pace(self, speed: Tensor, frames: int, pace: float) -> Tensor:
+        """(B,) whether the stored length nearest to ``frames`` holds a reaction whose pelvis
+        speed is within ``pace`` x ``speed`` (B,) m/s of each row's (all True for a bank
+        without speeds)."""
+        length = self.bucket(frames)
+        if length not in self.speeds:
+            return torch.ones(speed.shape, dtype=torch.bool, device=speed.device)
+        gap = (self.speeds[length].to(speed)[None] - speed[:, None]).abs()
+        return (gap <= pace * speed[:, None]).any(dim=1)
 
     def nearest(
         self,
@@ -96,13 +118,18 @@ class ReactionBank:
         scale: Callable[[Tensor], Tensor] = lambda z: z,
         prompt: Tensor | None = None,
         shortlist: int = 0,
+        speed: Tensor | None = None,
+        pace: float = 0.0,
     ) -> Tensor:
         """For each row of ``query`` (B, p, r) a real reaction (B, p, r): one of the
         ``neighbours`` nearest (Euclidean after ``scale``, e.g. the S-Flow's latent
         normaliser) among those of the stored length nearest to ``frames``, drawn uniformly
         with row i's generator. ``prompt`` (B, D) unit sentence embeddings and ``shortlist``
         > 0: only among the ``shortlist`` reactions whose captions are nearest the prompt
-        (a bank without captions ignores them)."""
+        (a bank without captions ignores them). ``speed`` (B,) m/s and ``pace`` > 0: only
+        among the reactions whose pelvis speed is within ``pace`` x ``speed`` of it, and the
+        ``neighbours`` nearest in speed where fewer are (a bank without speeds ignores
+        them)."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
@@ -114,6 +141,12 @@ class ReactionBank:
         else:
             bank_size = bank.shape[0]
         k = max(1, min(int(neighbours), bank_size))
+        if speed is not None and pace > 0 and length in self.speeds:
+            gap = (self.speeds[length].to(d)[None] - speed.to(d)[:, None]).abs()  # (B, N)
+            gap = gap.masked_fill(torch.isinf(d), float("inf"))  # only the shortlist's
+            near = gap <= pace * speed.to(d)[:, None]
+            near.scatter_(1, gap.topk(k, dim=1, largest=False).indices, True)
+            d = d.masked_fill(~near, float("inf"))
         idx = d.topk(k, dim=1, largest=False).indices  # (B, k), nearest first
         pick = randn((query.shape[0], k), generator, device=query.device).argmax(dim=1)
         return bank[idx[torch.arange(query.shape[0], device=query.device), pick]]

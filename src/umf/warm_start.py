@@ -19,6 +19,13 @@ with the context as always. The proposal (``sflow.warm_proposal``):
   rigidly on the floor to where the first pass starts. The P-Flow makes person 1, so this
   proposes person 1's role: a caller's partner stands still instead of walking over
   (results/umf-small-bandai-20261205).
+
+``sflow.warm_glide`` > 0 keeps the second pass only for the people whose first pass glides
+(:func:`glide_score` above it) and everybody else's first pass as it was: a bow or a
+gesture does not glide, and a proposal from elsewhere only costs it its fit to the context.
+``sflow.warm_pace`` > 0 retrieves only real reactions at the first pass's pace (its decoded
+path keeps pace where its legs do not), and keeps the first pass of a person for whom the
+bank has none (:func:`warm_rows`).
 """
 
 from __future__ import annotations
@@ -30,7 +37,7 @@ import torch
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
 from umf.reaction_bank import REACTIONS
-from umf.representation import leader_frame, transform_features
+from umf.representation import features_to_joints, leader_frame, transform_features
 
 Tensor = torch.Tensor
 
@@ -42,6 +49,31 @@ def move_onto(features: Tensor, there: Tensor) -> Tensor:
         transform_features(transform_features(f, leader_frame(f)), leader_frame(g),
                            inverse=True)
         for f, g in zip(features, there, strict=True)])  # fmt: skip
+
+
+# the pelvis's mean floor speed (m/s) under which a person is not travelling, so not gliding
+MOVING = 0.5
+ANKLES = (7, 8)
+
+
+def floor_speeds(features: Tensor, fps: float) -> tuple[Tensor, Tensor]:
+    """(B,) mean floor speeds (m/s) of the pelvis and of the slower ankle, for features
+    (B, T, 262)."""
+    floor = features_to_joints(features)[..., [0, 2]]
+    speed = (floor[:, 1:] - floor[:, :-1]).norm(dim=-1) * fps  # (B, T - 1, 22)
+    slower = torch.minimum(speed[:, :, ANKLES[0]], speed[:, :, ANKLES[1]])
+    return speed[:, :, 0].mean(1), slower.mean(1)
+
+
+def glide_score(features: Tensor, fps: float) -> Tensor:
+    """(B,) the slower ankle's mean floor speed over the pelvis's for features (B, T, 262);
+    0 for a row whose pelvis travels under ``MOVING``. A stride keeps one foot near rest, a
+    glide carries both: real followers walking side by side score about 0.13 (at most 0.24),
+    real runners 0.41 (at most 0.47); the bundled S-Flow's walkers 0.4-0.6, its runners
+    0.6-0.7 (results/umf-small-bandai-20261206)."""
+    pelvis, slower = floor_speeds(features, fps)
+    score = slower / pelvis.clamp_min(1e-6)
+    return torch.where(pelvis >= MOVING, score, torch.zeros_like(score))
 
 
 def proposal(
@@ -64,9 +96,13 @@ def proposal(
                 f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
             )
         prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
+        speed = None
+        if cfg.warm_pace > 0:
+            decoded = pipe.decode(first, frames, reaction=True)
+            speed = floor_speeds(decoded, pipe.config.fps)[0]
         return pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
-                                      cfg.warm_shortlist), 0  # fmt: skip
+                                      cfg.warm_shortlist, speed, cfg.warm_pace), 0  # fmt: skip
     z, nfe = pipe.pflow.sample(
         text,
         uncond,
@@ -96,12 +132,33 @@ def sample_added(
 ) -> tuple[Tensor, int]:
     """The next person's latent (B, p, r) and the NFE, as the pipeline and re-rolls sample
     people 2..N: the S-Flow's pass and, with ``sflow.warm_start``, the pass again from its
-    proposal. ``own``: the person's own prompt (:func:`umf.person_prompts.person_text`);
+    proposal for the rows :func:`warm_rows` takes (it runs for every row, so a row's draws
+    never depend on its batch). ``own``: the person's own prompt (:func:`umf.person_prompts.person_text`);
     ``pflow_guidance``: the caller's guidance for a P-Flow proposal (None: its config's)."""
     kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
-    if pipe.config.sflow.warm_start:
+    cfg = pipe.config.sflow
+    if cfg.warm_start:
         guess, m = proposal(pipe, w, text, uncond, frames, generator, pflow_guidance, own)
-        w, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
+        again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
+        w = torch.where(warm_rows(pipe, w, frames)[:, None, None], again, w)
     return w, nfe
+
+
+def warm_rows(pipe: Any, first: Tensor, frames: int) -> Tensor:
+    """(B,) which first passes the second pass replaces: all, or with ``sflow.warm_glide``
+    those that glide, and with ``sflow.warm_pace`` (retrieved proposals) only those for
+    which the bank holds a real reaction at their pace: a person faster than every stored
+    reaction keeps their first pass rather than take a slower one."""
+    cfg = pipe.config.sflow
+    take = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
+    paced = cfg.warm_proposal == "retrieved" and cfg.warm_pace > 0
+    if cfg.warm_glide > 0 or paced:
+        decoded = pipe.decode(first, frames, reaction=True)
+        if cfg.warm_glide > 0:
+            take &= glide_score(decoded, pipe.config.fps) > cfg.warm_glide
+        if paced:
+            speed = floor_speeds(decoded, pipe.config.fps)[0]
+            take &= pipe.reactions.at_pace(speed, frames, cfg.warm_pace)
+    return take
