@@ -38,7 +38,8 @@ def scores(joints: np.ndarray, fps: float) -> list[float]:
     from umf.representation import joints_to_features
     from umf.warm_start import glide_score
 
-    feats = joints_to_features(torch.as_tensor(np.asarray(joints[1:]), dtype=torch.float32))
+    feats = torch.stack([joints_to_features(torch.as_tensor(np.asarray(j), dtype=torch.float32))
+                         for j in joints[1:]])  # fmt: skip
     return [round(float(s), 3) for s in glide_score(feats, fps)]
 
 
