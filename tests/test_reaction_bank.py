@@ -197,39 +197,44 @@ def test_a_shortlist_by_caption_restricts_the_candidates(tmp_path):
         ReactionBank.load(tmp_path)
 
 
-def test_a_pace_restricts_the_candidates_to_reactions_at_the_first_passs_speed(tmp_path):
-    """With speeds, only reactions whose pelvis speed is within ``pace`` x the query's
-    compete, and the ``neighbours`` nearest in speed where fewer are; speeds round-trip and
-    a bank whose speeds do not match its reactions is refused."""
+def test_a_pace_restricts_the_candidates_to_reactions_travelling_as_the_first_pass(tmp_path):
+    """With velocities, only reactions whose pelvis velocity is within ``pace`` x the
+    query's speed of it compete (speed and direction), and the ``neighbours`` nearest in
+    velocity where fewer are; velocities round-trip and a bank whose velocities do not match
+    its reactions is refused."""
     g = torch.Generator().manual_seed(5)
     latents = torch.randn(40, P, R, generator=g)
-    speeds = torch.linspace(0.0, 3.9, 40)  # reaction i travels at 0.1 i m/s
-    bank = ReactionBank({30: latents}, speeds={30: speeds})
-    query = latents[[2, 2]] + 0.01  # nearest in latent space: reaction 2, at 0.2 m/s
-    assert torch.equal(bank.nearest(query, 30, 1), latents[[2, 2]])
-    fast = torch.tensor([2.5, 1.0])
-    got = bank.nearest(query, 30, 1, speed=fast, pace=0.2)
-    for row, q in enumerate(fast.tolist()):
-        ok = ((speeds - q).abs() <= 0.2 * q + 1e-6).nonzero()[:, 0]
+    speed = torch.linspace(0.0, 1.95, 40)  # reaction i travels at 0.05 i m/s ...
+    sign = torch.where(torch.arange(40) % 2 == 0, 1.0, -1.0)  # ... forward (even) or back
+    velocities = torch.stack([torch.zeros(40), sign * speed], dim=1)
+    bank = ReactionBank({30: latents}, velocities={30: velocities})
+    query = latents[[3, 3]] + 0.01  # nearest in latent space: reaction 3 (0.15 m/s back)
+    assert torch.equal(bank.nearest(query, 30, 1), latents[[3, 3]])
+    want = torch.tensor([[0.0, 1.2], [0.0, -1.2]])  # 1.2 m/s forward, 1.2 m/s back
+    got = bank.nearest(query, 30, 1, velocity=want, pace=0.2)
+    for row in range(2):
+        ok = ((velocities - want[row]).norm(dim=-1) <= 0.2 * 1.2 + 1e-6).nonzero()[:, 0]
+        assert (velocities[ok, 1] * want[row, 1] > 0).all() and len(ok) >= 3
         d = torch.cdist(query[row : row + 1].flatten(1), latents[ok].flatten(1))
         assert torch.equal(got[row], latents[ok][d.argmin()])
-    # nothing within 1 % of 0.05 m/s: the 3 nearest in speed (0.0, 0.1, 0.2 m/s) compete
+    # nothing within 1 % of 3 m/s forward: the 3 fastest forward ones compete
     picks = {int((latents == bank.nearest(query[:1], 30, 3, torch.Generator().manual_seed(s),
-                                          speed=torch.tensor([0.05]), pace=0.01)[0])
+                                          velocity=torch.tensor([[0.0, 3.0]]), pace=0.01)[0])
                  .all(dim=(1, 2)).nonzero()) for s in range(30)}  # fmt: skip
-    assert picks == {0, 1, 2}
-    assert torch.equal(ReactionBank({30: latents}).nearest(query, 30, 1, speed=fast, pace=0.2),
-                       latents[[2, 2]])  # fmt: skip  # a bank without speeds ignores them
+    assert picks == {34, 36, 38}
+    assert torch.equal(ReactionBank({30: latents}).nearest(query, 30, 1, velocity=want,
+                                                           pace=0.2), latents[[3, 3]])  # fmt: skip
     bank.save(tmp_path)
-    torch.testing.assert_close(ReactionBank.load(tmp_path).speeds[30], speeds, atol=2e-3,
-                               rtol=1e-3)  # fmt: skip
-    ReactionBank({30: latents}, speeds={30: speeds[:5]}).save(tmp_path)
-    with pytest.raises(UMFError, match="speeds of 30 frames"):
+    torch.testing.assert_close(ReactionBank.load(tmp_path).velocities[30], velocities,
+                               atol=2e-3, rtol=1e-3)  # fmt: skip
+    ReactionBank({30: latents}, velocities={30: velocities[:, :1]}).save(tmp_path)
+    with pytest.raises(UMFError, match="velocities of 30 frames"):
         ReactionBank.load(tmp_path)
 
 
-def test_the_bank_stores_each_reactions_pelvis_speed(corpus, model):
+def test_the_bank_stores_each_reactions_pelvis_velocity(corpus, model):
     from umf.data.corpus import Corpus
+    from umf.representation import features_to_joints
     from umf.train.datasets import SceneDataset
 
     pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
@@ -239,20 +244,35 @@ def test_the_bank_stores_each_reactions_pelvis_speed(corpus, model):
                       max_frames=30, mirror=True, seed=0)  # fmt: skip
     people = torch.cat([ds[i]["features"][1:] for i in range(len(ds))
                         if ds[i]["features"].shape[1] == 30])  # fmt: skip
-    pelvis = rep_joints(pipe.normalizer.denormalize(people))[:, :, 0, [0, 2]]
-    want = (pelvis[:, 1:] - pelvis[:, :-1]).norm(dim=-1).mean(1) * pipe.config.fps
-    torch.testing.assert_close(bank.speeds[30], want, atol=1e-5, rtol=1e-5)
-    assert bank.speeds[30].max() > 0.1  # the fixture's people travel
-
-
-def rep_joints(features: torch.Tensor) -> torch.Tensor:
-    from umf.representation import features_to_joints
-
-    return features_to_joints(features)
+    pelvis = features_to_joints(pipe.normalizer.denormalize(people))[:, :, 0][..., [0, 2]]
+    want = (pelvis[:, -1] - pelvis[:, 0]) * pipe.config.fps / 29
+    torch.testing.assert_close(bank.velocities[30], want, atol=1e-5, rtol=1e-5)
+    assert bank.velocities[30].norm(dim=-1).max() > 0.1  # the fixture's people travel
 
 
 def test_at_pace_says_which_rows_the_bank_has_a_reaction_for():
-    bank = ReactionBank({30: torch.zeros(3, P, R)}, speeds={30: torch.tensor([0.0, 1.0, 2.0])})
-    got = bank.at_pace(torch.tensor([1.1, 2.3, 2.6, 0.5]), 33, 0.15)
-    assert got.tolist() == [True, True, False, False]
-    assert ReactionBank({30: torch.zeros(3, P, R)}).at_pace(torch.tensor([9.0]), 30, 0.1).all()
+    v = torch.tensor([[0.0, 0.0], [0.0, 1.0], [0.0, -2.0]])
+    bank = ReactionBank({30: torch.zeros(3, P, R)}, velocities={30: v})
+    rows = torch.tensor([[0.0, 1.1], [0.0, -2.3], [0.0, 2.0], [0.0, 0.5], [0.1, -2.05]])
+    assert bank.at_pace(rows, 33, 0.15).tolist() == [True, True, False, False, True]
+    no_velocities = ReactionBank({30: torch.zeros(3, P, R)})
+    assert no_velocities.at_pace(torch.tensor([[9.0, 0.0]]), 30, 0.1).all()
+
+
+def test_captions_are_stored_once_and_a_bad_row_is_refused(tmp_path):
+    from safetensors.torch import load_file, save_file
+
+    latents = torch.randn(6, P, R, generator=torch.Generator().manual_seed(2))
+    two = torch.nn.functional.normalize(torch.randn(2, 16), dim=-1)
+    bank = ReactionBank({30: latents[:4], 60: latents[4:]},
+                        {30: two[[0, 0, 1, 0]], 60: two[[1, 1]]})  # fmt: skip
+    path = bank.save(tmp_path)
+    raw = load_file(str(path))
+    assert raw["captions"].shape == (2, 16)  # two distinct captions, each stored once
+    back = ReactionBank.load(tmp_path)
+    for k in (30, 60):
+        torch.testing.assert_close(back.texts[k], bank.texts[k], atol=2e-3, rtol=1e-3)
+    raw["caption_30"] = torch.tensor([0, 1, 2, 0], dtype=torch.int32)
+    save_file(raw, str(path))
+    with pytest.raises(UMFError, match="corrupt reaction bank"):
+        ReactionBank.load(tmp_path)

@@ -148,7 +148,7 @@ def _gait(planted: bool, speed: float = 1.2, frames: int = 61, fps: float = 30.0
 
 
 def test_the_glide_score_tells_a_stride_from_a_glide():
-    from umf.warm_start import MOVING, floor_speeds, glide_score
+    from umf.warm_start import MOVING, floor_speeds, floor_velocity, glide_score
 
     stride, glide = _gait(True), _gait(False)
     pelvis, slower = floor_speeds(torch.stack([stride, glide]), 30.0)
@@ -158,6 +158,9 @@ def test_the_glide_score_tells_a_stride_from_a_glide():
     score = glide_score(torch.stack([stride, glide, _gait(False, speed=MOVING * 0.9)]), 30.0)
     assert float(score[0]) < 0.1 and abs(float(score[1]) - 1.0) < 1e-6
     assert float(score[2]) == 0.0  # not travelling: not gliding
+    v = floor_velocity(torch.stack([stride, glide]), 30.0)
+    torch.testing.assert_close(v, torch.tensor([[0.0, 1.2]] * 2, dtype=v.dtype), atol=1e-6,
+                               rtol=0)  # fmt: skip
 
 
 def test_warm_glide_keeps_the_first_pass_of_people_who_do_not_glide(models, monkeypatch):
@@ -193,8 +196,9 @@ def test_warm_rows_takes_gliding_people_the_bank_has_a_pace_for(models, monkeypa
     first = torch.zeros(4, *pipe.vae.latent_shape)
     monkeypatch.setattr(umf.warm_start, "glide_score",
                         lambda f, fps: torch.tensor([0.1, 0.5, 0.5, 0.5]))  # fmt: skip
-    monkeypatch.setattr(umf.warm_start, "floor_speeds",
-                        lambda f, fps: (torch.tensor([1.0, 1.0, 3.0, 1.0]), None))  # fmt: skip
+    monkeypatch.setattr(umf.warm_start, "floor_velocity",
+                        lambda f, fps: torch.tensor([[0.0, 1.0], [0.0, 1.0], [0.0, 3.0],
+                                                     [0.0, 1.0]]))  # fmt: skip
     cfg, old = pipe.config.sflow, (pipe.config.sflow.warm_glide, pipe.config.sflow.warm_pace,
                                    pipe.config.sflow.warm_proposal, pipe.reactions)  # fmt: skip
     try:
@@ -202,7 +206,7 @@ def test_warm_rows_takes_gliding_people_the_bank_has_a_pace_for(models, monkeypa
         cfg.warm_glide = 0.3
         assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, True, True]
         cfg.warm_pace, cfg.warm_proposal = 0.2, "retrieved"
-        pipe.reactions = ReactionBank({30: first[:1]}, speeds={30: torch.tensor([1.1])})
+        pipe.reactions = ReactionBank({30: first[:1]}, velocities={30: torch.tensor([[0.0, 1.1]])})
         assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, False, True]
         cfg.warm_proposal = "pflow"  # a pace is for retrieved proposals only
         assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, True, True]

@@ -204,9 +204,9 @@ class SFlowConfig:
     # > 0: the second pass only for people whose first pass glides (umf.warm_start.glide_score
     # above this), the others' first pass kept
     warm_glide: float = 0.0
-    # > 0: retrieve among the reactions whose pelvis travels within this fraction of the
-    # first pass's floor speed (its path keeps pace where its legs do not); needs a bank
-    # with speeds
+    # > 0: retrieve among the reactions whose pelvis velocity (person 1's frame) is within
+    # this fraction of the first pass's (its path keeps pace and direction where its legs
+    # do not); needs a bank with velocities
     warm_pace: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # the context C also enters the transformer beside the state, clean at every t (not in

@@ -10,8 +10,8 @@ A model directory carries them in ``reactions.safetensors``: for each length of 
 (``frames_30``, ``frames_45`` ... feature frames), the VAE's posterior means (N, p, r) of
 people 2..N of the training scenes, cropped to that length in person 1's frame (the crop
 the S-Flow trains on), with their scene captions' embeddings (``text_*``) and their
-pelvis's mean floor speed in m/s (``speed_*``). They are derived from the training data and
-carry its licence.
+pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``). They are
+derived from the training data and carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
 
@@ -29,8 +29,10 @@ from umf.io import save_tensors_atomic
 
 REACTIONS = "reactions.safetensors"
 PREFIX = "frames_"
-TEXT = "text_"
-SPEED = "speed_"
+TEXT = "text_"  # one embedding per reaction (banks written before the shared table)
+CAPTIONS = "captions"  # the distinct caption embeddings (U, D) ...
+CAPTION = "caption_"  # ... and each reaction's row of them (N,), per length
+VELOCITY = "velocity_"
 
 Tensor = torch.Tensor
 
@@ -43,20 +45,31 @@ class ReactionBank:
     # per length, each reaction's scene caption as a unit sentence embedding (N, D) in the
     # model's text encoder (umf.coverage.embed), for a shortlist by the prompt; may be empty
     texts: dict[int, Tensor] = field(default_factory=dict)
-    # per length, each reaction's pelvis mean floor speed (N,) in m/s; may be empty
-    speeds: dict[int, Tensor] = field(default_factory=dict)
+    # per length, each reaction's pelvis mean floor velocity (N, 2) in m/s, person 1's frame
+    # (umf.warm_start.floor_velocity); may be empty
+    velocities: dict[int, Tensor] = field(default_factory=dict)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
 
     def save(self, model_dir: str | Path) -> Path:
-        """Write ``reactions.safetensors`` into a model directory atomically (fp16)."""
+        """Write ``reactions.safetensors`` into a model directory atomically (fp16). A scene's
+        caption is shared by its people and its crops, so the caption embeddings are stored
+        once each (``captions``) with each reaction's row (``caption_*``): the bundled
+        model's bank holds 16,113 reactions of about 60 distinct captions per length."""
         path = Path(model_dir) / REACTIONS
         tensors = {f"{PREFIX}{k}": v for k, v in self.latents.items()}
-        tensors |= {f"{TEXT}{k}": v for k, v in self.texts.items()}
-        tensors |= {f"{SPEED}{k}": v for k, v in self.speeds.items()}
-        save_tensors_atomic({k: v.to(torch.float16).contiguous() for k, v in tensors.items()},
-                            path)  # fmt: skip
+        tensors |= {f"{VELOCITY}{k}": v for k, v in self.velocities.items()}
+        tensors = {k: v.to(torch.float16) for k, v in tensors.items()}
+        if self.texts:
+            lengths = sorted(self.texts)
+            every = torch.cat([self.texts[k].to(torch.float16) for k in lengths])
+            table, rows = torch.unique(every, dim=0, return_inverse=True)
+            tensors[CAPTIONS] = table
+            for k, part in zip(lengths, rows.split([len(self.texts[k]) for k in lengths]),
+                               strict=True):  # fmt: skip
+                tensors[f"{CAPTION}{k}"] = part.to(torch.int32)
+        save_tensors_atomic({k: v.contiguous() for k, v in tensors.items()}, path)
         path.chmod(0o644)
         return path
 
@@ -75,8 +88,15 @@ class ReactionBank:
                        if k.startswith(PREFIX)}  # fmt: skip
             texts = {int(k.removeprefix(TEXT)): v.float() for k, v in raw.items()
                      if k.startswith(TEXT)}  # fmt: skip
-            speeds = {int(k.removeprefix(SPEED)): v.float() for k, v in raw.items()
-                      if k.startswith(SPEED)}  # fmt: skip
+            table = raw.get(CAPTIONS)
+            for k, rows in raw.items():
+                if k.startswith(CAPTION) and k != CAPTIONS:
+                    if table is None or rows.ndim != 1 or (rows < 0).any() or (
+                            len(rows) and rows.max() >= len(table)):  # fmt: skip
+                        raise ValueError(f"{k} indexes no caption table")
+                    texts[int(k.removeprefix(CAPTION))] = table[rows.long()].float()
+            velocities = {int(k.removeprefix(VELOCITY)): v.float() for k, v in raw.items()
+                          if k.startswith(VELOCITY)}  # fmt: skip
         except (OSError, ValueError, RuntimeError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -87,27 +107,32 @@ class ReactionBank:
             z = latents.get(frames)
             if z is None or e.ndim != 2 or len(e) != len(z) or not torch.isfinite(e).all():
                 raise UMFError(f"{path}: captions of {frames} frames do not match its reactions")
-        for frames, v in speeds.items():
+        for frames, v in velocities.items():
             z = latents.get(frames)
-            if z is None or v.shape != (len(z),) or not torch.isfinite(v).all():
-                raise UMFError(f"{path}: speeds of {frames} frames do not match its reactions")
+            if z is None or v.shape != (len(z), 2) or not torch.isfinite(v).all():
+                raise UMFError(f"{path}: velocities of {frames} frames do not match its "
+                               "reactions")  # fmt: skip
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents, texts, speeds)
+        return cls(latents, texts, velocities)
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""
         return min(self.latents, key=lambda k: (abs(k - frames), k))
 
-    def at_pace(self, speed: Tensor, frames: int, pace: float) -> Tensor:
+    def _gap(self, length: int, velocity: Tensor) -> Tensor:
+        """(B, N) distances between each row's velocity (B, 2) and the stored ones."""
+        return torch.cdist(velocity, self.velocities[length].to(velocity))
+
+    def at_pace(self, velocity: Tensor, frames: int, pace: float) -> Tensor:
         """(B,) whether the stored length nearest to ``frames`` holds a reaction whose pelvis
-        speed is within ``pace`` x ``speed`` (B,) m/s of each row's (all True for a bank
-        without speeds)."""
+        velocity is within ``pace`` x |``velocity``| of each row's (B, 2) m/s (all True for a
+        bank without velocities)."""
         length = self.bucket(frames)
-        if length not in self.speeds:
-            return torch.ones(speed.shape, dtype=torch.bool, device=speed.device)
-        gap = (self.speeds[length].to(speed)[None] - speed[:, None]).abs()
-        return (gap <= pace * speed[:, None]).any(dim=1)
+        if length not in self.velocities:
+            return torch.ones(velocity.shape[0], dtype=torch.bool, device=velocity.device)
+        tolerance = pace * velocity.norm(dim=-1, keepdim=True)
+        return (self._gap(length, velocity) <= tolerance).any(dim=1)
 
     def nearest(
         self,
@@ -118,7 +143,7 @@ class ReactionBank:
         scale: Callable[[Tensor], Tensor] = lambda z: z,
         prompt: Tensor | None = None,
         shortlist: int = 0,
-        speed: Tensor | None = None,
+        velocity: Tensor | None = None,
         pace: float = 0.0,
     ) -> Tensor:
         """For each row of ``query`` (B, p, r) a real reaction (B, p, r): one of the
@@ -126,10 +151,10 @@ class ReactionBank:
         normaliser) among those of the stored length nearest to ``frames``, drawn uniformly
         with row i's generator. ``prompt`` (B, D) unit sentence embeddings and ``shortlist``
         > 0: only among the ``shortlist`` reactions whose captions are nearest the prompt
-        (a bank without captions ignores them). ``speed`` (B,) m/s and ``pace`` > 0: only
-        among the reactions whose pelvis speed is within ``pace`` x ``speed`` of it, and the
-        ``neighbours`` nearest in speed where fewer are (a bank without speeds ignores
-        them)."""
+        (a bank without captions ignores them). ``velocity`` (B, 2) m/s and ``pace`` > 0: only
+        among the reactions whose pelvis velocity is within ``pace`` x |``velocity``| of it
+        (its speed and its direction in person 1's frame), and the ``neighbours`` nearest in
+        velocity where fewer are (a bank without velocities ignores them)."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
@@ -141,10 +166,10 @@ class ReactionBank:
         else:
             bank_size = bank.shape[0]
         k = max(1, min(int(neighbours), bank_size))
-        if speed is not None and pace > 0 and length in self.speeds:
-            gap = (self.speeds[length].to(d)[None] - speed.to(d)[:, None]).abs()  # (B, N)
+        if velocity is not None and pace > 0 and length in self.velocities:
+            gap = self._gap(length, velocity.to(d))  # (B, N)
             gap = gap.masked_fill(torch.isinf(d), float("inf"))  # only the shortlist's
-            near = gap <= pace * speed.to(d)[:, None]
+            near = gap <= pace * velocity.to(d).norm(dim=-1, keepdim=True)
             near.scatter_(1, gap.topk(k, dim=1, largest=False).indices, True)
             d = d.masked_fill(~near, float("inf"))
         idx = d.topk(k, dim=1, largest=False).indices  # (B, k), nearest first

@@ -23,9 +23,10 @@ with the context as always. The proposal (``sflow.warm_proposal``):
 ``sflow.warm_glide`` > 0 keeps the second pass only for the people whose first pass glides
 (:func:`glide_score` above it) and everybody else's first pass as it was: a bow or a
 gesture does not glide, and a proposal from elsewhere only costs it its fit to the context.
-``sflow.warm_pace`` > 0 retrieves only real reactions at the first pass's pace (its decoded
-path keeps pace where its legs do not), and keeps the first pass of a person for whom the
-bank has none (:func:`warm_rows`).
+``sflow.warm_pace`` > 0 retrieves only real reactions that travel as the first pass does
+(its decoded path keeps pace and direction where its legs do not): pelvis velocities in
+person 1's frame within that fraction of the first pass's. A person for whom the bank has
+none keeps the first pass (:func:`warm_rows`).
 """
 
 from __future__ import annotations
@@ -65,6 +66,13 @@ def floor_speeds(features: Tensor, fps: float) -> tuple[Tensor, Tensor]:
     return speed[:, :, 0].mean(1), slower.mean(1)
 
 
+def floor_velocity(features: Tensor, fps: float) -> Tensor:
+    """(B, 2) the pelvis's mean floor velocity (x, z) in m/s, start to end, for features
+    (B, T, 262), in their frame: for people 2..N, person 1's."""
+    pelvis = features_to_joints(features)[:, :, 0][..., [0, 2]]
+    return (pelvis[:, -1] - pelvis[:, 0]) * fps / max(pelvis.shape[1] - 1, 1)
+
+
 def glide_score(features: Tensor, fps: float) -> Tensor:
     """(B,) the slower ankle's mean floor speed over the pelvis's for features (B, T, 262);
     0 for a row whose pelvis travels under ``MOVING``. A stride keeps one foot near rest, a
@@ -96,13 +104,13 @@ def proposal(
                 f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
             )
         prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
-        speed = None
+        velocity = None
         if cfg.warm_pace > 0:
             decoded = pipe.decode(first, frames, reaction=True)
-            speed = floor_speeds(decoded, pipe.config.fps)[0]
+            velocity = floor_velocity(decoded, pipe.config.fps)
         return pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
-                                      cfg.warm_shortlist, speed, cfg.warm_pace), 0  # fmt: skip
+                                      cfg.warm_shortlist, velocity, cfg.warm_pace), 0  # fmt: skip
     z, nfe = pipe.pflow.sample(
         text,
         uncond,
@@ -133,8 +141,9 @@ def sample_added(
     """The next person's latent (B, p, r) and the NFE, as the pipeline and re-rolls sample
     people 2..N: the S-Flow's pass and, with ``sflow.warm_start``, the pass again from its
     proposal for the rows :func:`warm_rows` takes (it runs for every row, so a row's draws
-    never depend on its batch). ``own``: the person's own prompt (:func:`umf.person_prompts.person_text`);
-    ``pflow_guidance``: the caller's guidance for a P-Flow proposal (None: its config's)."""
+    never depend on its batch). ``own``: the person's own prompt
+    (:func:`umf.person_prompts.person_text`); ``pflow_guidance``: the caller's guidance for
+    a P-Flow proposal (None: its config's)."""
     kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
     cfg = pipe.config.sflow
@@ -149,8 +158,8 @@ def sample_added(
 def warm_rows(pipe: Any, first: Tensor, frames: int) -> Tensor:
     """(B,) which first passes the second pass replaces: all, or with ``sflow.warm_glide``
     those that glide, and with ``sflow.warm_pace`` (retrieved proposals) only those for
-    which the bank holds a real reaction at their pace: a person faster than every stored
-    reaction keeps their first pass rather than take a slower one."""
+    which the bank holds a real reaction travelling as they do: a person faster than every
+    stored reaction keeps their first pass rather than take a slower one."""
     cfg = pipe.config.sflow
     take = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
     paced = cfg.warm_proposal == "retrieved" and cfg.warm_pace > 0
@@ -159,6 +168,6 @@ def warm_rows(pipe: Any, first: Tensor, frames: int) -> Tensor:
         if cfg.warm_glide > 0:
             take &= glide_score(decoded, pipe.config.fps) > cfg.warm_glide
         if paced:
-            speed = floor_speeds(decoded, pipe.config.fps)[0]
-            take &= pipe.reactions.at_pace(speed, frames, cfg.warm_pace)
+            velocity = floor_velocity(decoded, pipe.config.fps)
+            take &= pipe.reactions.at_pace(velocity, frames, cfg.warm_pace)
     return take

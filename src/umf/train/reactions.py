@@ -15,7 +15,7 @@ from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
 from umf.train.datasets import SceneDataset
-from umf.warm_start import floor_speeds
+from umf.warm_start import floor_velocity
 
 STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
 
@@ -38,14 +38,14 @@ def build_reaction_bank(
     """People 2..N of the train split's scenes and real takes, cropped to each length in
     person 1's frame (mirrored at random, as in training), as the VAE's posterior means, with
     their scene's caption embedded by the model's text encoder and their pelvis's mean floor
-    speed; at most ``per_length`` per
+    velocity; at most ``per_length`` per
     length, drawn with ``seed``. A length no scene is long enough for is left out."""
     corpus = Corpus.load(corpus_dir)
     lengths = list(lengths or bank_lengths(pipe.config.vae.max_frames))
     rng = np.random.default_rng(seed)
     latents: dict[int, torch.Tensor] = {}
     texts: dict[int, torch.Tensor] = {}
-    speeds: dict[int, torch.Tensor] = {}
+    velocities: dict[int, torch.Tensor] = {}
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
                           max_frames=frames, mirror=True, seed=seed)  # fmt: skip
@@ -63,12 +63,12 @@ def build_reaction_bank(
         x = torch.stack([people[i] for i in keep]).to(pipe.device)
         mask = torch.ones(x.shape[:2], dtype=torch.bool, device=x.device)
         texts[frames] = embed(pipe.text_encoder, [captions[i] for i in keep])
-        speeds[frames] = floor_speeds(pipe.normalizer.denormalize(x.cpu()), pipe.config.fps)[0]
+        velocities[frames] = floor_velocity(pipe.normalizer.denormalize(x.cpu()), pipe.config.fps)
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
     if not latents:
         raise UMFError(f"{corpus_dir}: no multi-person train scene to take reactions from")
-    return ReactionBank(latents, texts, speeds)
+    return ReactionBank(latents, texts, velocities)
 
 
 def write_reactions(
