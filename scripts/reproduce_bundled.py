@@ -5,8 +5,9 @@ GPU, then fine-tunes on a CPU; each step has a results page). This runs the same
 in order, with the options those pages and the shipped ``config.json`` record, into
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
 (the last seven training stages, ``teach``, ``reteach``, ``rebalance``, ``settle``, ``pace``,
-``person`` and ``person2``, need the full corpus of ``make corpus`` with ``../shared``: Bandai
-and the CMU and DeepMimic mocap):
+``person`` and ``person2``, and the bank of real reactions the last stage, ``name``, writes
+(``umf train reactions``, 3-5 min), need the full corpus of ``make corpus`` with
+``../shared``: Bandai and the CMU and DeepMimic mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -46,7 +47,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261204b"
+NAME = "umf-small-bandai-20261206"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -137,6 +138,12 @@ PERSON2 = [*sets("train_pflow", max_steps=800, lr=0.0002, real_repeats=60,
                  relation_repeats=["stand_facing=8"], val_every=400, ckpt_every=50),
            *sets("train_sflow", max_steps=1500, lr=0.0003, real_repeats=60,
                  relation_repeats=["stand_facing=8"], val_every=500, ckpt_every=100)]  # fmt: skip
+
+
+# the last stage's sampling options (results/umf-small-bandai-20261204b, 20261206)
+NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_start=0.5",
+         "sflow.warm_proposal=retrieved", "sflow.warm_glide=0.3", "sflow.warm_pace=0.15",
+         "sflow.warm_shortlist=64"]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -233,10 +240,13 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(one_flow("person", m["steps"], "pflow,sflow", PERSON))
     person = work / "runs" / "person"
     out.append(one_flow("person2", person / "model", "pflow,sflow", PERSON2))
-    # results/umf-small-bandai-20261204b: own prompts guided at 3 apart from the scene's 2
-    out.append(variant("name", work / "runs" / "person2" / "model", work / "model", "--set",
-                       "pflow.person_guidance=3.0", "--set", "sflow.person_guidance=3.0",
-                       "--name", NAME))  # fmt: skip
+    # results/umf-small-bandai-20261204b: own prompts guided at 3 apart from the scene's 2;
+    # results/umf-small-bandai-20261206: gliding people 2..N warm-started from a real
+    # reaction travelling as they do, from the bank of the corpus's train scenes
+    name = variant("name", work / "runs" / "person2" / "model", work / "model",
+                   *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
+    reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]
+    out.append(name._replace(commands=[*name.commands, reactions]))
     return out
 
 
