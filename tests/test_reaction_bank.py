@@ -276,3 +276,48 @@ def test_captions_are_stored_once_and_a_bad_row_is_refused(tmp_path):
     save_file(raw, str(path))
     with pytest.raises(UMFError, match="corrupt reaction bank"):
         ReactionBank.load(tmp_path)
+
+
+def test_a_finetune_on_solo_clips_keeps_the_base_bank_or_turns_the_warm_start_off(
+    model, tmp_path, monkeypatch
+):
+    """A corpus without multi-person train scenes has no reactions: the fine-tuned model
+    keeps the base model's bank where its VAE is the base's, and otherwise samples without
+    the warm start; either way it loads and generates."""
+    import umf.train.reactions as reactions
+    from umf.train.run import give_reactions
+
+    base = Path(shutil.copytree(model, tmp_path / "base"))
+    ReactionBank({30: torch.randn(5, *UMFPipeline.from_pretrained(
+        base, text_encoder=FakeText()).vae.latent_shape)}).save(base)  # fmt: skip
+
+    def none(*args, **kwargs):
+        raise reactions.NoReactions("no multi-person train scene")
+
+    monkeypatch.setattr(reactions, "write_reactions", none)
+    for own_vae in (False, True):
+        out = Path(shutil.copytree(model, tmp_path / f"out-{own_vae}"))
+        logs: list[str] = []
+        give_reactions(out, tmp_path, base, own_vae, False, logs.append)
+        cfg = json.loads((out / "config.json").read_text())
+        if own_vae:  # a fine-tuned VAE: the base's latents no longer fit
+            assert not (out / REACTIONS).exists() and cfg["sflow"]["warm_start"] == 0.0
+        else:
+            assert (out / REACTIONS).read_bytes() == (base / REACTIONS).read_bytes()
+            assert cfg["sflow"]["warm_start"] == 0.5
+        assert logs and "no multi-person train scene" in logs[0]
+        (scene,) = UMFPipeline.from_pretrained(out, text_encoder=FakeText())(
+            "two people walk", num_people=2, seconds=1.0, seed=0, fit=False)  # fmt: skip
+        assert np.isfinite(scene.joints).all()
+
+
+def test_a_corpus_without_scenes_has_no_reactions(model, tmp_path):
+    from umf.train.reactions import NoReactions
+
+    solo = prepare_fixture_corpus(tmp_path / "solo", train_scenes=1, val_scenes=1,
+                                  test_scenes=1, test_groups=1)  # fmt: skip
+    scenes = json.loads((solo / "scenes.json").read_text())
+    (solo / "scenes.json").write_text(json.dumps({**scenes, "train": []}))  # solo clips only
+    pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    with pytest.raises(NoReactions, match="no multi-person train scene"):
+        build_reaction_bank(solo, pipe, lengths=[30], progress=False, log=lambda m: None)

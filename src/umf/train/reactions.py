@@ -20,6 +20,10 @@ from umf.warm_start import floor_velocity
 STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
 
 
+class NoReactions(UMFError):
+    """A corpus without multi-person train scenes: there is no reaction to store."""
+
+
 def bank_lengths(max_frames: int, step: int = STEP, shortest: int = 30) -> list[int]:
     """The lengths a bank stores: every ``step`` frames from ``shortest`` to ``max_frames``."""
     return list(range(shortest, max_frames + 1, step))
@@ -38,9 +42,14 @@ def build_reaction_bank(
     """People 2..N of the train split's scenes and real takes, cropped to each length in
     person 1's frame (mirrored at random, as in training), as the VAE's posterior means, with
     their scene's caption embedded by the model's text encoder and their pelvis's mean floor
-    velocity; at most ``per_length`` per
-    length, drawn with ``seed``. A length no scene is long enough for is left out."""
+    velocity; at most ``per_length`` per length, drawn with ``seed``. A length no scene is
+    long enough for is left out; a corpus without multi-person train scenes raises
+    :class:`NoReactions`."""
     corpus = Corpus.load(corpus_dir)
+    if not corpus.scenes.get("train") and not any(
+        c.num_people > 1 for c in corpus.split_clips("train")
+    ):
+        raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
     lengths = list(lengths or bank_lengths(pipe.config.vae.max_frames))
     rng = np.random.default_rng(seed)
     latents: dict[int, torch.Tensor] = {}
@@ -67,7 +76,7 @@ def build_reaction_bank(
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
     if not latents:
-        raise UMFError(f"{corpus_dir}: no multi-person train scene to take reactions from")
+        raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
     return ReactionBank(latents, texts, velocities)
 
 

@@ -550,10 +550,37 @@ def finetune(
     out = export_model(run_dir, run_dir / "model", base=model, log=log)
     write_vocabulary(out, corpus_dir)
     if cfg.sflow.warm_start and cfg.sflow.warm_proposal == "retrieved":
-        from umf.train.reactions import write_reactions
-
-        write_reactions(out, corpus_dir, progress=launch.progress, log=log)
+        give_reactions(out, corpus_dir, model, own_vae, launch.progress, log)
     return out
+
+
+def give_reactions(out: Path, corpus_dir: Path, base: Path, own_vae: bool, progress: bool,
+                   log: Callable[[str], None]) -> None:  # fmt: skip
+    """The bank of real reactions a fine-tuned model's warm start retrieves from: its
+    corpus's. A corpus without multi-person train scenes (a library of solo clips) keeps
+    the base model's bank where the VAE was not fine-tuned (its latents still fit), and
+    otherwise turns the warm start off in the exported config, so the model still loads."""
+    import shutil
+
+    from umf.reaction_bank import REACTIONS
+    from umf.train.reactions import NoReactions, write_reactions
+
+    try:
+        write_reactions(out, corpus_dir, progress=progress, log=log)
+        return
+    except NoReactions as exc:
+        log(f"reactions: {exc}")
+    if not own_vae and (base / REACTIONS).exists():
+        tmp = out / f"{REACTIONS}.tmp"
+        shutil.copyfile(base / REACTIONS, tmp)
+        tmp.replace(out / REACTIONS)
+        log(f"reactions: the model keeps the bank of {base}")
+        return
+    config = json.loads((out / "config.json").read_text())
+    config["sflow"]["warm_start"] = 0.0
+    write_json_atomic(out / "config.json", config)
+    log("reactions: none to retrieve, so the exported model samples without the warm start "
+        "(sflow.warm_start=0)")  # fmt: skip
 
 
 def write_vocabulary(model: Path, corpus_dir: Path, threshold: float | None = None):
