@@ -321,3 +321,42 @@ def test_a_corpus_without_scenes_has_no_reactions(model, tmp_path):
     pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
     with pytest.raises(NoReactions, match="no multi-person train scene"):
         build_reaction_bank(solo, pipe, lengths=[30], progress=False, log=lambda m: None)
+
+
+def test_the_pace_looks_only_inside_the_caption_shortlist():
+    """With a shortlist and a pace, a reaction at pace outside the shortlist neither
+    qualifies a row (``at_pace``) nor is chosen (``nearest``)."""
+    latents = torch.randn(4, P, R, generator=torch.Generator().manual_seed(3))
+    texts = torch.eye(4, 16)  # reaction i's caption is unit vector i
+    velocities = torch.tensor([[0.0, 0.0], [0.0, 0.2], [0.0, 1.4], [0.0, 1.8]])
+    bank = ReactionBank({30: latents}, {30: texts}, {30: velocities})
+    prompt = torch.nn.functional.normalize(torch.tensor([[1.0, 0.9, 0.8] + [0.0] * 13]), dim=-1)
+    fast = torch.tensor([[0.0, 1.8]])  # only reaction 3 is at pace, and it is not shortlisted
+    assert bank.at_pace(fast, 30, 0.15).tolist() == [True]
+    assert bank.at_pace(fast, 30, 0.15, prompt, shortlist=3).tolist() == [False]
+    assert bank.at_pace(torch.tensor([[0.0, 1.5]]), 30, 0.15, prompt, 3).tolist() == [True]
+    query = latents[[3]] + 0.01
+    assert torch.equal(bank.nearest(query, 30, 1, velocity=fast, pace=0.15), latents[[3]])
+    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3, velocity=fast, pace=0.15)
+    assert torch.equal(got, latents[[2]])  # the shortlisted reaction nearest in velocity
+    # a slow row: the tolerance is a share of at least PACE_FLOOR m/s, not of its own speed
+    from umf.reaction_bank import PACE_FLOOR
+
+    slow = torch.tensor([[0.0, 0.05]])
+    assert bank.at_pace(slow, 30, 0.2).tolist() == [True]  # 0 and 0.2 m/s within 0.1 of 0.05
+    assert bank.at_pace(slow, 30, 0.2 * 0.05 / PACE_FLOOR).tolist() == [False]
+
+
+def test_a_legacy_bank_with_a_caption_per_reaction_loads_and_bad_rows_are_refused(tmp_path):
+    from safetensors.torch import save_file
+
+    latents = torch.randn(3, P, R, generator=torch.Generator().manual_seed(6)).half()
+    texts = torch.nn.functional.normalize(torch.randn(3, 16), dim=-1).half()
+    save_file({"frames_30": latents, "text_30": texts}, str(tmp_path / REACTIONS))
+    back = ReactionBank.load(tmp_path, (P, R))
+    assert torch.equal(back.texts[30], texts.float()) and back.velocities == {}
+    for rows in (torch.tensor([0.0, 1.5, 0.0]), torch.tensor([0, 1, 2]).int()[None]):
+        save_file({"frames_30": latents, "captions": texts, "caption_30": rows},
+                  str(tmp_path / REACTIONS))  # fmt: skip
+        with pytest.raises(UMFError, match="corrupt reaction bank"):
+            ReactionBank.load(tmp_path)

@@ -206,7 +206,7 @@ class SFlowConfig:
     warm_glide: float = 0.0
     # > 0: retrieve among the reactions whose pelvis velocity (person 1's frame) is within
     # this fraction of the first pass's (its path keeps pace and direction where its legs
-    # do not); needs a bank with velocities
+    # do not); a bank without velocities (written before them) is used without it
     warm_pace: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # the context C also enters the transformer beside the state, clean at every t (not in

@@ -32,6 +32,9 @@ PREFIX = "frames_"
 TEXT = "text_"  # one embedding per reaction (banks written before the shared table)
 CAPTIONS = "captions"  # the distinct caption embeddings (U, D) ...
 CAPTION = "caption_"  # ... and each reaction's row of them (N,), per length
+# the slowest speed (m/s) a pace tolerance is a share of: a person barely travelling would
+# otherwise match no reaction but its own standstill
+PACE_FLOOR = 0.5
 VELOCITY = "velocity_"
 
 Tensor = torch.Tensor
@@ -91,13 +94,14 @@ class ReactionBank:
             table = raw.get(CAPTIONS)
             for k, rows in raw.items():
                 if k.startswith(CAPTION) and k != CAPTIONS:
-                    if table is None or rows.ndim != 1 or (rows < 0).any() or (
-                            len(rows) and rows.max() >= len(table)):  # fmt: skip
+                    integer = rows.dtype in (torch.int32, torch.int64) and rows.ndim == 1
+                    fits = table is not None and table.ndim == 2 and integer
+                    if not fits or (rows < 0).any() or (len(rows) and rows.max() >= len(table)):
                         raise ValueError(f"{k} indexes no caption table")
                     texts[int(k.removeprefix(CAPTION))] = table[rows.long()].float()
             velocities = {int(k.removeprefix(VELOCITY)): v.float() for k, v in raw.items()
                           if k.startswith(VELOCITY)}  # fmt: skip
-        except (OSError, ValueError, RuntimeError, SafetensorError) as exc:
+        except (OSError, ValueError, RuntimeError, IndexError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
             fits = z.ndim == 3 and len(z) and (shape is None or z.shape[1:] == tuple(shape))
@@ -124,15 +128,35 @@ class ReactionBank:
         """(B, N) distances between each row's velocity (B, 2) and the stored ones."""
         return torch.cdist(velocity, self.velocities[length].to(velocity))
 
-    def at_pace(self, velocity: Tensor, frames: int, pace: float) -> Tensor:
-        """(B,) whether the stored length nearest to ``frames`` holds a reaction whose pelvis
-        velocity is within ``pace`` x |``velocity``| of each row's (B, 2) m/s (all True for a
-        bank without velocities)."""
+    def _within(self, length: int, velocity: Tensor, pace: float) -> Tensor:
+        """(B, N) the reactions within ``pace`` x each row's speed (at least ``PACE_FLOOR``)
+        of its velocity."""
+        tolerance = pace * velocity.norm(dim=-1, keepdim=True).clamp_min(PACE_FLOOR)
+        return self._gap(length, velocity) <= tolerance
+
+    def _shortlisted(self, length: int, prompt: Tensor | None, shortlist: int,
+                     like: Tensor) -> Tensor | None:  # fmt: skip
+        """(B, N) the ``shortlist`` reactions whose captions are nearest each row's prompt
+        (B, D), or None where every reaction competes (no prompt, no shortlist, or a bank
+        without captions)."""
+        if prompt is None or shortlist <= 0 or length not in self.texts:
+            return None
+        sims = prompt.to(like) @ self.texts[length].to(like).T  # (B, N)
+        keep = sims.topk(min(shortlist, sims.shape[1]), dim=1).indices
+        return torch.zeros(sims.shape, dtype=torch.bool, device=sims.device).scatter(1, keep, True)
+
+    def at_pace(self, velocity: Tensor, frames: int, pace: float, prompt: Tensor | None = None,
+                shortlist: int = 0) -> Tensor:  # fmt: skip
+        """(B,) whether the reactions :meth:`nearest` would choose among for each row (the
+        stored length nearest to ``frames``, the caption shortlist) hold one whose pelvis
+        velocity is within ``pace`` x the row's speed of its velocity (B, 2) m/s (all True for
+        a bank without velocities)."""
         length = self.bucket(frames)
         if length not in self.velocities:
             return torch.ones(velocity.shape[0], dtype=torch.bool, device=velocity.device)
-        tolerance = pace * velocity.norm(dim=-1, keepdim=True)
-        return (self._gap(length, velocity) <= tolerance).any(dim=1)
+        ok = self._within(length, velocity, pace)
+        allowed = self._shortlisted(length, prompt, shortlist, velocity)
+        return (ok if allowed is None else ok & allowed).any(dim=1)
 
     def nearest(
         self,
@@ -152,24 +176,22 @@ class ReactionBank:
         with row i's generator. ``prompt`` (B, D) unit sentence embeddings and ``shortlist``
         > 0: only among the ``shortlist`` reactions whose captions are nearest the prompt
         (a bank without captions ignores them). ``velocity`` (B, 2) m/s and ``pace`` > 0: only
-        among the reactions whose pelvis velocity is within ``pace`` x |``velocity``| of it
-        (its speed and its direction in person 1's frame), and the ``neighbours`` nearest in
-        velocity where fewer are (a bank without velocities ignores them)."""
+        among those whose pelvis velocity is within ``pace`` x the row's speed (at least
+        ``PACE_FLOOR``) of it (speed and direction in person 1's frame), and the
+        ``neighbours`` nearest in velocity where fewer are (a bank without velocities ignores
+        them; :meth:`at_pace` says which rows have none within)."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
-        if prompt is not None and shortlist > 0 and length in self.texts:
-            sims = prompt.to(d) @ self.texts[length].to(d).T  # (B, N)
-            keep = sims.topk(min(shortlist, sims.shape[1]), dim=1).indices
-            d = torch.full_like(d, float("inf")).scatter(1, keep, d.gather(1, keep))
-            bank_size = keep.shape[1]
-        else:
-            bank_size = bank.shape[0]
-        k = max(1, min(int(neighbours), bank_size))
+        allowed = self._shortlisted(length, prompt, shortlist, d)
+        if allowed is not None:
+            d = d.masked_fill(~allowed, float("inf"))
+        k = max(1, min(int(neighbours), bank.shape[0] if allowed is None else shortlist))
         if velocity is not None and pace > 0 and length in self.velocities:
-            gap = self._gap(length, velocity.to(d))  # (B, N)
-            gap = gap.masked_fill(torch.isinf(d), float("inf"))  # only the shortlist's
-            near = gap <= pace * velocity.to(d).norm(dim=-1, keepdim=True)
+            velocity = velocity.to(d)
+            gap, near = self._gap(length, velocity), self._within(length, velocity, pace)
+            if allowed is not None:  # the shortlist's only
+                gap, near = gap.masked_fill(~allowed, float("inf")), near & allowed
             near.scatter_(1, gap.topk(k, dim=1, largest=False).indices, True)
             d = d.masked_fill(~near, float("inf"))
         idx = d.topk(k, dim=1, largest=False).indices  # (B, k), nearest first

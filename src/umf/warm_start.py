@@ -84,6 +84,12 @@ def glide_score(features: Tensor, fps: float) -> Tensor:
     return torch.where(pelvis >= MOVING, score, torch.zeros_like(score))
 
 
+def unit_prompt(text: Any) -> Tensor:
+    """(B, D) the prompts' pooled text features as unit vectors: what the bank's caption
+    shortlist compares."""
+    return torch.nn.functional.normalize(text.pooled.float(), dim=-1)
+
+
 def proposal(
     pipe: Any,
     first: Tensor,
@@ -103,7 +109,7 @@ def proposal(
                 f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
                 f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
             )
-        prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
+        prompt = unit_prompt(text)
         velocity = None
         if cfg.warm_pace > 0:
             decoded = pipe.decode(first, frames, reaction=True)
@@ -151,15 +157,16 @@ def sample_added(
         guess, m = proposal(pipe, w, text, uncond, frames, generator, pflow_guidance, own)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
-        w = torch.where(warm_rows(pipe, w, frames)[:, None, None], again, w)
+        w = torch.where(warm_rows(pipe, w, frames, text)[:, None, None], again, w)
     return w, nfe
 
 
-def warm_rows(pipe: Any, first: Tensor, frames: int) -> Tensor:
+def warm_rows(pipe: Any, first: Tensor, frames: int, text: Any = None) -> Tensor:
     """(B,) which first passes the second pass replaces: all, or with ``sflow.warm_glide``
     those that glide, and with ``sflow.warm_pace`` (retrieved proposals) only those for
-    which the bank holds a real reaction travelling as they do: a person faster than every
-    stored reaction keeps their first pass rather than take a slower one."""
+    which the bank holds a real reaction travelling as they do among those the retrieval
+    chooses from (``text``: the prompts, for the caption shortlist): a person faster than
+    every such reaction keeps their first pass rather than take a slower one."""
     cfg = pipe.config.sflow
     take = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
     paced = cfg.warm_proposal == "retrieved" and cfg.warm_pace > 0
@@ -169,5 +176,7 @@ def warm_rows(pipe: Any, first: Tensor, frames: int) -> Tensor:
             take &= glide_score(decoded, pipe.config.fps) > cfg.warm_glide
         if paced:
             velocity = floor_velocity(decoded, pipe.config.fps)
-            take &= pipe.reactions.at_pace(velocity, frames, cfg.warm_pace)
+            prompt = None if text is None else unit_prompt(text)
+            take &= pipe.reactions.at_pace(velocity, frames, cfg.warm_pace, prompt,
+                                           cfg.warm_shortlist)  # fmt: skip
     return take

@@ -28,7 +28,7 @@ from umf.checkpoint import (
 from umf.config import TrainConfig, UMFConfig, family_config, relation_repeats, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
-from umf.io import write_json_atomic
+from umf.io import atomic_path, write_json_atomic
 from umf.representation import Normalizer
 from umf.train.batching import MixedBatches, make_loader
 from umf.train.datasets import SceneDataset, SingleMotionDataset, check_labels
@@ -571,9 +571,8 @@ def give_reactions(out: Path, corpus_dir: Path, base: Path, own_vae: bool, progr
     except NoReactions as exc:
         log(f"reactions: {exc}")
     if not own_vae and (base / REACTIONS).exists():
-        tmp = out / f"{REACTIONS}.tmp"
-        shutil.copyfile(base / REACTIONS, tmp)
-        tmp.replace(out / REACTIONS)
+        with atomic_path(out / REACTIONS) as tmp:
+            shutil.copyfile(base / REACTIONS, tmp)
         log(f"reactions: the model keeps the bank of {base}")
         return
     config = json.loads((out / "config.json").read_text())
