@@ -6,7 +6,7 @@ leader to the generated leader? (the "reactions that keep up" issue; not in the 
 For the model's bank (built from ``--corpus``'s train scenes with the same draws as
 ``umf train reactions``), each reaction's leader speed is measured: person 1's start-to-end
 floor speed in the same crop. Then, for each weight w, the velocity gap the retrieval and
-``at_pace`` use becomes sqrt(|v_bank - v_first|^2 + (w |lead_bank - lead_generated|)^2),
+its pace check use becomes sqrt(|v_bank - v_first|^2 + (w |lead_bank - lead_generated|)^2),
 with the generated person 1's decoded speed, and ``research/keep_pace.py`` runs (seeds 0-7).
 w = 0 is the model as shipped. This patches ``umf.reaction_bank`` and ``umf.pipeline`` in
 this process only.

@@ -50,24 +50,24 @@ def test_nearest_takes_the_stored_length_nearest_and_one_of_the_k_nearest():
     query = store[[3, 7, 11]] + 0.01 * torch.randn(
         3, P, R, generator=torch.Generator().manual_seed(1)
     )
-    assert torch.equal(bank.nearest(query, 33, 1), store[[3, 7, 11]])
+    assert torch.equal(bank.nearest(query, 33, 1)[0], store[[3, 7, 11]])
     d = torch.cdist(query.flatten(1), store.flatten(1))
     near = d.topk(5, largest=False).indices
     gens = [torch.Generator().manual_seed(s) for s in range(3)]
-    got = bank.nearest(query, 33, 5, gens)
+    got = bank.nearest(query, 33, 5, gens)[0]
     for row, z in enumerate(got):
         i = int((store == z).all(dim=(1, 2)).nonzero())
         assert i in near[row].tolist()
-    again = bank.nearest(query, 33, 5, [torch.Generator().manual_seed(s) for s in range(3)])
+    again = bank.nearest(query, 33, 5, [torch.Generator().manual_seed(s) for s in range(3)])[0]
     assert torch.equal(got, again)  # seeded, row by row
-    picks = {int((store == bank.nearest(query[:1], 33, 5, torch.Generator().manual_seed(s))[0])
+    picks = {int((store == bank.nearest(query[:1], 33, 5, torch.Generator().manual_seed(s))[0][0])
                  .all(dim=(1, 2)).nonzero()) for s in range(40)}  # fmt: skip
     assert picks == set(near[0].tolist())  # every one of the 5 is drawn
     # the distance is measured after ``scale``: one that weighs channel 0 a thousandfold
     weigh = torch.ones(R)
     weigh[0] = 1000.0
     far = torch.randn(3, P, R, generator=torch.Generator().manual_seed(9))
-    scaled = bank.nearest(far, 33, 1, scale=lambda z: z * weigh)
+    scaled = bank.nearest(far, 33, 1, scale=lambda z: z * weigh)[0]
     want = torch.cdist((far * weigh).flatten(1), (store * weigh).flatten(1)).argmin(dim=1)
     plain = torch.cdist(far.flatten(1), store.flatten(1)).argmin(dim=1)
     assert torch.equal(scaled, store[want]) and not torch.equal(want, plain)
@@ -129,9 +129,9 @@ def test_the_pipeline_warm_starts_from_a_real_reaction(corpus, model, tmp_path, 
     real = umf.warm_start.proposal
 
     def seen(*args):
-        z, nfe = real(*args)
+        z, nfe, fits = real(*args)
         proposals.append(z)
-        return z, nfe
+        return z, nfe, fits
 
     monkeypatch.setattr(umf.warm_start, "proposal", seen)
     a = pipe("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]
@@ -176,19 +176,19 @@ def test_a_shortlist_by_caption_restricts_the_candidates(tmp_path):
     texts = torch.nn.functional.normalize(torch.randn(30, 16, generator=g), dim=-1)
     bank = ReactionBank({30: latents}, {30: texts})
     query = latents[[5]] + 0.01
-    assert torch.equal(bank.nearest(query, 30, 1), latents[[5]])
+    assert torch.equal(bank.nearest(query, 30, 1)[0], latents[[5]])
     prompt = torch.nn.functional.normalize(torch.randn(1, 16, generator=g), dim=-1)
     short = (prompt @ texts.T).topk(2).indices[0]  # the two captions nearest the prompt
     assert 5 not in short.tolist()
-    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=2)
+    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=2)[0]
     d = torch.cdist(query.flatten(1), latents[short].flatten(1))
     assert torch.equal(got, latents[short][d.argmin(dim=1)])
     picks = {int((latents == bank.nearest(query, 30, 4, torch.Generator().manual_seed(s),
-                                          prompt=prompt, shortlist=2)[0]).all(dim=(1, 2))
+                                          prompt=prompt, shortlist=2)[0][0]).all(dim=(1, 2))
                  .nonzero()) for s in range(20)}  # fmt: skip
     assert picks == set(short.tolist())  # 4 neighbours asked, 2 on the shortlist
-    assert torch.equal(ReactionBank({30: latents}).nearest(query, 30, 1, prompt=prompt,
-                                                           shortlist=2), latents[[5]])  # fmt: skip
+    plain = ReactionBank({30: latents})  # no captions: the shortlist is ignored
+    assert torch.equal(plain.nearest(query, 30, 1, prompt=prompt, shortlist=2)[0], latents[[5]])
     bank.save(tmp_path)
     back = ReactionBank.load(tmp_path, (P, R))
     torch.testing.assert_close(back.texts[30], texts, atol=2e-3, rtol=1e-3)
@@ -209,9 +209,9 @@ def test_a_pace_restricts_the_candidates_to_reactions_travelling_as_the_first_pa
     velocities = torch.stack([torch.zeros(40), sign * speed], dim=1)
     bank = ReactionBank({30: latents}, velocities={30: velocities})
     query = latents[[3, 3]] + 0.01  # nearest in latent space: reaction 3 (0.15 m/s back)
-    assert torch.equal(bank.nearest(query, 30, 1), latents[[3, 3]])
+    assert torch.equal(bank.nearest(query, 30, 1)[0], latents[[3, 3]])
     want = torch.tensor([[0.0, 1.2], [0.0, -1.2]])  # 1.2 m/s forward, 1.2 m/s back
-    got = bank.nearest(query, 30, 1, velocity=want, pace=0.2)
+    got = bank.nearest(query, 30, 1, velocity=want, pace=0.2)[0]
     for row in range(2):
         ok = ((velocities - want[row]).norm(dim=-1) <= 0.2 * 1.2 + 1e-6).nonzero()[:, 0]
         assert (velocities[ok, 1] * want[row, 1] > 0).all() and len(ok) >= 3
@@ -219,11 +219,11 @@ def test_a_pace_restricts_the_candidates_to_reactions_travelling_as_the_first_pa
         assert torch.equal(got[row], latents[ok][d.argmin()])
     # nothing within 1 % of 3 m/s forward: the 3 fastest forward ones compete
     picks = {int((latents == bank.nearest(query[:1], 30, 3, torch.Generator().manual_seed(s),
-                                          velocity=torch.tensor([[0.0, 3.0]]), pace=0.01)[0])
+                                          velocity=torch.tensor([[0.0, 3.0]]), pace=0.01)[0][0])
                  .all(dim=(1, 2)).nonzero()) for s in range(30)}  # fmt: skip
     assert picks == {34, 36, 38}
-    assert torch.equal(ReactionBank({30: latents}).nearest(query, 30, 1, velocity=want,
-                                                           pace=0.2), latents[[3, 3]])  # fmt: skip
+    plain = ReactionBank({30: latents})  # no velocities: the pace is ignored
+    assert torch.equal(plain.nearest(query, 30, 1, velocity=want, pace=0.2)[0], latents[[3, 3]])
     bank.save(tmp_path)
     torch.testing.assert_close(ReactionBank.load(tmp_path).velocities[30], velocities,
                                atol=2e-3, rtol=1e-3)  # fmt: skip
@@ -250,13 +250,20 @@ def test_the_bank_stores_each_reactions_pelvis_velocity(corpus, model):
     assert bank.velocities[30].norm(dim=-1).max() > 0.1  # the fixture's people travel
 
 
-def test_at_pace_says_which_rows_the_bank_has_a_reaction_for():
+def at_pace(bank, velocity, frames, pace, prompt=None, shortlist=0):
+    """Whether :meth:`ReactionBank.nearest` found each row a reaction at ``pace``."""
+    query = torch.zeros(len(velocity), *next(iter(bank.latents.values())).shape[1:])
+    return bank.nearest(query, frames, 1, prompt=prompt, shortlist=shortlist,
+                        velocity=velocity, pace=pace)[1]  # fmt: skip
+
+
+def test_nearest_says_which_rows_the_bank_has_a_reaction_at_pace_for():
     v = torch.tensor([[0.0, 0.0], [0.0, 1.0], [0.0, -2.0]])
     bank = ReactionBank({30: torch.zeros(3, P, R)}, velocities={30: v})
     rows = torch.tensor([[0.0, 1.1], [0.0, -2.3], [0.0, 2.0], [0.0, 0.5], [0.1, -2.05]])
-    assert bank.at_pace(rows, 33, 0.15).tolist() == [True, True, False, False, True]
+    assert at_pace(bank, rows, 33, 0.15).tolist() == [True, True, False, False, True]
     no_velocities = ReactionBank({30: torch.zeros(3, P, R)})
-    assert no_velocities.at_pace(torch.tensor([[9.0, 0.0]]), 30, 0.1).all()
+    assert at_pace(no_velocities, torch.tensor([[9.0, 0.0]]), 30, 0.1).all()
 
 
 def test_captions_are_stored_once_and_a_bad_row_is_refused(tmp_path):
@@ -325,26 +332,26 @@ def test_a_corpus_without_scenes_has_no_reactions(model, tmp_path):
 
 def test_the_pace_looks_only_inside_the_caption_shortlist():
     """With a shortlist and a pace, a reaction at pace outside the shortlist neither
-    qualifies a row (``at_pace``) nor is chosen (``nearest``)."""
+    qualifies a row nor is chosen."""
     latents = torch.randn(4, P, R, generator=torch.Generator().manual_seed(3))
     texts = torch.eye(4, 16)  # reaction i's caption is unit vector i
     velocities = torch.tensor([[0.0, 0.0], [0.0, 0.2], [0.0, 1.4], [0.0, 1.8]])
     bank = ReactionBank({30: latents}, {30: texts}, {30: velocities})
     prompt = torch.nn.functional.normalize(torch.tensor([[1.0, 0.9, 0.8] + [0.0] * 13]), dim=-1)
     fast = torch.tensor([[0.0, 1.8]])  # only reaction 3 is at pace, and it is not shortlisted
-    assert bank.at_pace(fast, 30, 0.15).tolist() == [True]
-    assert bank.at_pace(fast, 30, 0.15, prompt, shortlist=3).tolist() == [False]
-    assert bank.at_pace(torch.tensor([[0.0, 1.5]]), 30, 0.15, prompt, 3).tolist() == [True]
+    assert at_pace(bank, fast, 30, 0.15).tolist() == [True]
+    assert at_pace(bank, fast, 30, 0.15, prompt, shortlist=3).tolist() == [False]
+    assert at_pace(bank, torch.tensor([[0.0, 1.5]]), 30, 0.15, prompt, 3).tolist() == [True]
     query = latents[[3]] + 0.01
-    assert torch.equal(bank.nearest(query, 30, 1, velocity=fast, pace=0.15), latents[[3]])
-    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3, velocity=fast, pace=0.15)
+    assert torch.equal(bank.nearest(query, 30, 1, velocity=fast, pace=0.15)[0], latents[[3]])
+    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3, velocity=fast, pace=0.15)[0]
     assert torch.equal(got, latents[[2]])  # the shortlisted reaction nearest in velocity
     # a slow row: the tolerance is a share of at least PACE_FLOOR m/s, not of its own speed
     from umf.reaction_bank import PACE_FLOOR
 
     slow = torch.tensor([[0.0, 0.05]])
-    assert bank.at_pace(slow, 30, 0.2).tolist() == [True]  # 0 and 0.2 m/s within 0.1 of 0.05
-    assert bank.at_pace(slow, 30, 0.2 * 0.05 / PACE_FLOOR).tolist() == [False]
+    assert at_pace(bank, slow, 30, 0.2).tolist() == [True]  # 0 and 0.2 m/s within 0.1 of 0.05
+    assert at_pace(bank, slow, 30, 0.2 * 0.05 / PACE_FLOOR).tolist() == [False]
 
 
 def test_a_legacy_bank_with_a_caption_per_reaction_loads_and_bad_rows_are_refused(tmp_path):

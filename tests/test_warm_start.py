@@ -83,9 +83,9 @@ def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models, monke
 
     real, seen = umf.warm_start.proposal, []
 
-    def spy(pipe, first, text, uncond, frames, generator, guidance, own):
+    def spy(pipe, first, decoded, text, uncond, generator, guidance, own):
         seen.append(own)
-        return real(pipe, first, text, uncond, frames, generator, guidance, own)
+        return real(pipe, first, decoded, text, uncond, generator, guidance, own)
 
     monkeypatch.setattr(umf.warm_start, "proposal", spy)
     _scene(models["warm"], people=2, own=[None, "waves with the right hand"])
@@ -95,8 +95,9 @@ def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models, monke
     # the same first pass, the same noise: with and without the own prompt, two proposals
     first = randn((1, *pipe.vae.latent_shape), torch.Generator().manual_seed(0))
     text, uncond = (pipe.text_encoder.encode([p]) for p in ("two people walk", ""))
-    a, b = (real(pipe, first, text, uncond, 30, torch.Generator().manual_seed(1), None, own)[0]
-            for own in ({}, seen[0]))  # fmt: skip
+    decoded = pipe.decode(first, 30, reaction=True)
+    a, b = (real(pipe, first, decoded, text, uncond, torch.Generator().manual_seed(1), None,
+                 own)[0] for own in ({}, seen[0]))  # fmt: skip
     assert not torch.allclose(a, b)
 
 
@@ -108,8 +109,8 @@ def test_the_proposal_matters(models, monkeypatch):
     real = umf.warm_start.proposal
 
     def shifted(pipe, first, *args):
-        z, nfe = real(pipe, first, *args)
-        return z + 1.0, nfe
+        z, nfe, fits = real(pipe, first, *args)
+        return z + 1.0, nfe, fits
 
     monkeypatch.setattr(umf.warm_start, "proposal", shifted)
     other = _scene(models["warm"], people=2)
@@ -188,27 +189,39 @@ def test_warm_glide_keeps_the_first_pass_of_people_who_do_not_glide(models, monk
         pipe.config.sflow.warm_glide = 0.0
 
 
-def test_warm_rows_takes_gliding_people_the_bank_has_a_pace_for(models, monkeypatch):
+def test_warm_rows_takes_gliding_people_the_proposal_fits(models, monkeypatch):
+    """The second pass replaces the rows the proposal fits, and with a glide threshold only
+    the gliding ones among them; a retrieved proposal with a pace fits a row only where the
+    bank has a reaction at its pace, a P-Flow proposal every row."""
     import umf.warm_start
     from umf.reaction_bank import ReactionBank
+    from umf.warm_start import proposal, warm_rows
 
     pipe = models["warm"]
     first = torch.zeros(4, *pipe.vae.latent_shape)
+    decoded = pipe.decode(first, 30, reaction=True)
     monkeypatch.setattr(umf.warm_start, "glide_score",
                         lambda f, fps: torch.tensor([0.1, 0.5, 0.5, 0.5]))  # fmt: skip
+    fits = torch.tensor([True, True, False, True])
+    assert torch.equal(warm_rows(decoded, fits, 30.0, 0.0), fits)  # no threshold: the fit
+    assert warm_rows(decoded, fits, 30.0, 0.3).tolist() == [False, True, False, True]
+    assert warm_rows(decoded, torch.ones(4, dtype=torch.bool), 30.0, 0.3).tolist() == [
+        False, True, True, True]  # fmt: skip
     monkeypatch.setattr(umf.warm_start, "floor_velocity",
                         lambda f, fps: torch.tensor([[0.0, 1.0], [0.0, 1.0], [0.0, 3.0],
                                                      [0.0, 1.0]]))  # fmt: skip
-    cfg, old = pipe.config.sflow, (pipe.config.sflow.warm_glide, pipe.config.sflow.warm_pace,
-                                   pipe.config.sflow.warm_proposal, pipe.reactions)  # fmt: skip
+    text, uncond = (pipe.text_encoder.encode([p] * 4) for p in ("two people walk", ""))
+    cfg, old = pipe.config.sflow, (pipe.config.sflow.warm_pace, pipe.config.sflow.warm_proposal,
+                                   pipe.reactions)  # fmt: skip
+    gens = [torch.Generator().manual_seed(s) for s in range(4)]
     try:
-        assert umf.warm_start.warm_rows(pipe, first, 30).all()  # neither: every row
-        cfg.warm_glide = 0.3
-        assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, True, True]
         cfg.warm_pace, cfg.warm_proposal = 0.2, "retrieved"
         pipe.reactions = ReactionBank({30: first[:1]}, velocities={30: torch.tensor([[0.0, 1.1]])})
-        assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, False, True]
-        cfg.warm_proposal = "pflow"  # a pace is for retrieved proposals only
-        assert umf.warm_start.warm_rows(pipe, first, 30).tolist() == [False, True, True, True]
+        got = proposal(pipe, first, decoded, text, uncond, gens, None, {})[2]
+        assert got.tolist() == [True, True, False, True]
+        cfg.warm_pace = 0.0  # no pace: every row fits
+        assert proposal(pipe, first, decoded, text, uncond, gens, None, {})[2].all()
+        cfg.warm_pace, cfg.warm_proposal = 0.2, "pflow"  # a pace is for retrieved proposals
+        assert proposal(pipe, first, decoded, text, uncond, gens, None, {})[2].all()
     finally:
-        cfg.warm_glide, cfg.warm_pace, cfg.warm_proposal, pipe.reactions = old
+        cfg.warm_pace, cfg.warm_proposal, pipe.reactions = old

@@ -145,19 +145,6 @@ class ReactionBank:
         keep = sims.topk(min(shortlist, sims.shape[1]), dim=1).indices
         return torch.zeros(sims.shape, dtype=torch.bool, device=sims.device).scatter(1, keep, True)
 
-    def at_pace(self, velocity: Tensor, frames: int, pace: float, prompt: Tensor | None = None,
-                shortlist: int = 0) -> Tensor:  # fmt: skip
-        """(B,) whether the reactions :meth:`nearest` would choose among for each row (the
-        stored length nearest to ``frames``, the caption shortlist) hold one whose pelvis
-        velocity is within ``pace`` x the row's speed of its velocity (B, 2) m/s (all True for
-        a bank without velocities)."""
-        length = self.bucket(frames)
-        if length not in self.velocities:
-            return torch.ones(velocity.shape[0], dtype=torch.bool, device=velocity.device)
-        ok = self._within(length, velocity, pace)
-        allowed = self._shortlisted(length, prompt, shortlist, velocity)
-        return (ok if allowed is None else ok & allowed).any(dim=1)
-
     def nearest(
         self,
         query: Tensor,
@@ -169,7 +156,7 @@ class ReactionBank:
         shortlist: int = 0,
         velocity: Tensor | None = None,
         pace: float = 0.0,
-    ) -> Tensor:
+    ) -> tuple[Tensor, Tensor]:
         """For each row of ``query`` (B, p, r) a real reaction (B, p, r): one of the
         ``neighbours`` nearest (Euclidean after ``scale``, e.g. the S-Flow's latent
         normaliser) among those of the stored length nearest to ``frames``, drawn uniformly
@@ -179,7 +166,8 @@ class ReactionBank:
         among those whose pelvis velocity is within ``pace`` x the row's speed (at least
         ``PACE_FLOOR``) of it (speed and direction in person 1's frame), and the
         ``neighbours`` nearest in velocity where fewer are (a bank without velocities ignores
-        them; :meth:`at_pace` says which rows have none within)."""
+        them). Also (B,) whether each row had one within its pace (all True without a pace),
+        so a caller can keep what it had rather than take a reaction at the wrong pace."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
@@ -187,13 +175,15 @@ class ReactionBank:
         if allowed is not None:
             d = d.masked_fill(~allowed, float("inf"))
         k = max(1, min(int(neighbours), bank.shape[0] if allowed is None else shortlist))
+        at_pace = torch.ones(query.shape[0], dtype=torch.bool, device=query.device)
         if velocity is not None and pace > 0 and length in self.velocities:
             velocity = velocity.to(d)
             gap, near = self._gap(length, velocity), self._within(length, velocity, pace)
             if allowed is not None:  # the shortlist's only
                 gap, near = gap.masked_fill(~allowed, float("inf")), near & allowed
+            at_pace = near.any(dim=1)
             near.scatter_(1, gap.topk(k, dim=1, largest=False).indices, True)
             d = d.masked_fill(~near, float("inf"))
         idx = d.topk(k, dim=1, largest=False).indices  # (B, k), nearest first
         pick = randn((query.shape[0], k), generator, device=query.device).argmax(dim=1)
-        return bank[idx[torch.arange(query.shape[0], device=query.device), pick]]
+        return bank[idx[torch.arange(query.shape[0], device=query.device), pick]], at_pace

@@ -39,6 +39,7 @@ from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
 from umf.reaction_bank import REACTIONS
 from umf.representation import features_to_joints, leader_frame, transform_features
+from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 
 Tensor = torch.Tensor
 
@@ -54,7 +55,7 @@ def move_onto(features: Tensor, there: Tensor) -> Tensor:
 
 # the pelvis's mean floor speed (m/s) under which a person is not travelling, so not gliding
 MOVING = 0.5
-ANKLES = (7, 8)
+ANKLES = (FOOT_LEFT[0], FOOT_RIGHT[0])
 
 
 def floor_speeds(features: Tensor, fps: float) -> tuple[Tensor, Tensor]:
@@ -76,47 +77,41 @@ def floor_velocity(features: Tensor, fps: float) -> Tensor:
 def glide_score(features: Tensor, fps: float) -> Tensor:
     """(B,) the slower ankle's mean floor speed over the pelvis's for features (B, T, 262);
     0 for a row whose pelvis travels under ``MOVING``. A stride keeps one foot near rest, a
-    glide carries both: real followers walking side by side score about 0.13 (at most 0.24),
-    real runners 0.41 (at most 0.47); the bundled S-Flow's walkers 0.4-0.6, its runners
-    0.6-0.7 (results/umf-small-bandai-20261206)."""
+    glide carries both: real followers walking side by side score about 0.14 (at most 0.23),
+    real runners 0.41 (at most 0.47); the S-Flow of 20261204b's walkers 0.44-0.58, its
+    runners 0.61-0.71 (``research/glide_scores.py``, results/umf-small-bandai-20261206)."""
     pelvis, slower = floor_speeds(features, fps)
     score = slower / pelvis.clamp_min(1e-6)
     return torch.where(pelvis >= MOVING, score, torch.zeros_like(score))
 
 
-def unit_prompt(text: Any) -> Tensor:
-    """(B, D) the prompts' pooled text features as unit vectors: what the bank's caption
-    shortlist compares."""
-    return torch.nn.functional.normalize(text.pooled.float(), dim=-1)
-
-
 def proposal(
     pipe: Any,
     first: Tensor,
+    decoded: Tensor,
     text: Any,
     uncond: Any,
-    frames: int,
     generator: Any,
     guidance: float | None,
     own: dict[str, Any],
-) -> tuple[Tensor, int]:
-    """The proposal for the first pass's reaction ``first`` (B, p, r) of ``frames`` feature
-    frames: its latent (B, p, r) on the VAE's scale and the NFE it took (module notes)."""
-    cfg = pipe.config.sflow
+) -> tuple[Tensor, int, Tensor]:
+    """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
+    as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
+    took, and (B,) whether it fits the row (a retrieved one at the first pass's pace, with
+    ``sflow.warm_pace``; module notes)."""
+    cfg, frames = pipe.config.sflow, decoded.shape[1]
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
             raise UMFError(
                 f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
                 f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
             )
-        prompt = unit_prompt(text)
-        velocity = None
-        if cfg.warm_pace > 0:
-            decoded = pipe.decode(first, frames, reaction=True)
-            velocity = floor_velocity(decoded, pipe.config.fps)
-        return pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
-                                      pipe.sflow.latent_norm.normalize, prompt,
-                                      cfg.warm_shortlist, velocity, cfg.warm_pace), 0  # fmt: skip
+        prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
+        velocity = floor_velocity(decoded, pipe.config.fps) if cfg.warm_pace > 0 else None
+        z, fits = pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
+                                         pipe.sflow.latent_norm.normalize, prompt,
+                                         cfg.warm_shortlist, velocity, cfg.warm_pace)  # fmt: skip
+        return z, 0, fits
     z, nfe = pipe.pflow.sample(
         text,
         uncond,
@@ -126,8 +121,15 @@ def proposal(
         generator=generator,
         **own,
     )
-    moved = move_onto(pipe.decode(z, frames), pipe.decode(first, frames, reaction=True))
-    return pipe._encode(moved), nfe
+    fits = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
+    return pipe._encode(move_onto(pipe.decode(z, frames), decoded)), nfe, fits
+
+
+def warm_rows(decoded: Tensor, fits: Tensor, fps: float, glide: float) -> Tensor:
+    """(B,) which first passes (``decoded`` (B, T, 262)) the second pass replaces: those the
+    proposal ``fits``, and with ``glide`` > 0 (``sflow.warm_glide``) only those that glide
+    (:func:`glide_score` above it)."""
+    return fits & (glide_score(decoded, fps) > glide) if glide > 0 else fits
 
 
 def sample_added(
@@ -154,29 +156,10 @@ def sample_added(
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
     cfg = pipe.config.sflow
     if cfg.warm_start:
-        guess, m = proposal(pipe, w, text, uncond, frames, generator, pflow_guidance, own)
+        decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
+        guess, m, fits = proposal(pipe, w, decoded, text, uncond, generator, pflow_guidance, own)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
-        w = torch.where(warm_rows(pipe, w, frames, text)[:, None, None], again, w)
+        take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide)
+        w = torch.where(take[:, None, None], again, w)
     return w, nfe
-
-
-def warm_rows(pipe: Any, first: Tensor, frames: int, text: Any = None) -> Tensor:
-    """(B,) which first passes the second pass replaces: all, or with ``sflow.warm_glide``
-    those that glide, and with ``sflow.warm_pace`` (retrieved proposals) only those for
-    which the bank holds a real reaction travelling as they do among those the retrieval
-    chooses from (``text``: the prompts, for the caption shortlist): a person faster than
-    every such reaction keeps their first pass rather than take a slower one."""
-    cfg = pipe.config.sflow
-    take = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
-    paced = cfg.warm_proposal == "retrieved" and cfg.warm_pace > 0
-    if cfg.warm_glide > 0 or paced:
-        decoded = pipe.decode(first, frames, reaction=True)
-        if cfg.warm_glide > 0:
-            take &= glide_score(decoded, pipe.config.fps) > cfg.warm_glide
-        if paced:
-            velocity = floor_velocity(decoded, pipe.config.fps)
-            prompt = None if text is None else unit_prompt(text)
-            take &= pipe.reactions.at_pace(velocity, frames, cfg.warm_pace, prompt,
-                                           cfg.warm_shortlist)  # fmt: skip
-    return take

@@ -71,7 +71,10 @@ def build_reaction_bank(
         keep = np.sort(rng.permutation(len(people))[:per_length])
         x = torch.stack([people[i] for i in keep]).to(pipe.device)
         mask = torch.ones(x.shape[:2], dtype=torch.bool, device=x.device)
-        texts[frames] = embed(pipe.text_encoder, [captions[i] for i in keep])
+        chosen = [captions[i] for i in keep]
+        distinct = sorted(set(chosen))  # a scene's caption is shared by its people and crops
+        row = {c: i for i, c in enumerate(distinct)}
+        texts[frames] = embed(pipe.text_encoder, distinct)[[row[c] for c in chosen]]
         velocities[frames] = floor_velocity(pipe.normalizer.denormalize(x.cpu()), pipe.config.fps)
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
