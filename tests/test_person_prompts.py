@@ -186,6 +186,54 @@ def test_composed_guidance_sets_the_own_prompts_pull_apart():
     assert torch.allclose(same(x, t), plain(x, t))
 
 
+def test_conjoined_guidance_pulls_each_prompt_from_nothing():
+    """``conjoin``: v_u + s (v_scene - v_u) + s_own (v_own - v_u), the own prompt a prompt
+    of its own (the AND of composable diffusion), in the same one forward of three."""
+    from umf.flows import composed_guidance
+
+    calls = []
+
+    def velocity(x, t, *, text):
+        calls.append(x.shape[0])
+        return x * 0 + text[:, None, None]
+
+    x, t = torch.zeros(2, 3, 4), torch.zeros(2)
+    own, scene, none = torch.tensor([5.0, 7.0]), torch.tensor([2.0, 3.0]), torch.tensor([1.0, 1.0])
+    field = composed_guidance(velocity, 2.0, 4.0, {"text": own}, {"text": scene},
+                              {"text": none}, conjoin=True)  # fmt: skip
+    want = none + 2.0 * (scene - none) + 4.0 * (own - none)  # 19, 29: not 15, 21 (joint)
+    assert torch.allclose(field(x, t)[:, 0, 0], want) and calls == [6]
+
+
+def test_a_conjoined_own_prompt_goes_through_the_scene_head_alone():
+    """``person_composition`` "and": the own prompt enters as a prompt alone (its token from
+    the scene's text head, no person projection), so with ``person_guidance`` 0 the sample
+    is the scene prompt's alone, and a row without an own prompt is guided by the scene
+    twice over, never by another row's prompt."""
+    model = pflow(True, person_composition="and")
+    randomise_projection(model)  # the projection is not used by the conjoined form
+    text, empty, own = make_text(2, seed=1), make_text(1, length=2, seed=2), make_text(2, seed=5)
+    g = lambda: torch.Generator().manual_seed(0)  # noqa: E731
+    base, _ = model.sample(text, empty, generator=g())
+    model.cfg.person_guidance = 0.0
+    none, _ = model.sample(text, empty, generator=g(), person_text=own)
+    assert torch.allclose(none, base, atol=1e-5)
+    model.cfg.person_guidance = 3.0
+    conj, _ = model.sample(text, empty, generator=g(), person_text=own)
+    model.cfg.person_composition = "joint"
+    joint, _ = model.sample(text, empty, generator=g(), person_text=own)
+    assert not torch.allclose(conj, base) and not torch.allclose(conj, joint)
+    # the own prompt as the scene prompt: conjoined with itself it is plain CFG at 3 + 3
+    model.cfg.person_composition = "and"
+    same, _ = model.sample(text, empty, generator=g(), person_text=text)
+    plain, _ = model.sample(text, empty, generator=g(), guidance=6.0)
+    assert torch.allclose(same, plain, atol=1e-4)
+    present = torch.tensor([True, False])
+    mixed, _ = model.sample(text, empty, generator=g(), person_text=own, person_present=present)
+    assert torch.allclose(mixed[0], conj[0], atol=1e-5)
+    assert torch.allclose(mixed[1], plain[1], atol=1e-4)  # the scene's, at 3 + 3
+
+
 def test_person_guidance_strengthens_only_the_own_prompt():
     """At person_guidance 1 against the scene's, the own prompt pulls less than at 4; a
     sample without an own prompt does not depend on it."""

@@ -52,8 +52,12 @@ def models(tmp_path_factory):
     cfg = json.loads((warm / "config.json").read_text())
     cfg["sflow"]["warm_start"] = 0.5
     (warm / "config.json").write_text(json.dumps(cfg))
+    told = Path(shutil.copytree(cold, cold.parent / "told"))  # own_warm alone
+    cfg = json.loads((told / "config.json").read_text())
+    cfg["sflow"]["own_warm"] = 0.5
+    (told / "config.json").write_text(json.dumps(cfg))
     return {k: UMFPipeline.from_pretrained(p, text_encoder=FakeText())
-            for k, p in (("cold", cold), ("warm", warm))}  # fmt: skip
+            for k, p in (("cold", cold), ("warm", warm), ("told", told))}  # fmt: skip
 
 
 def _scene(pipe, people=3, seed=0, own=None):
@@ -101,6 +105,31 @@ def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models, monke
     assert not torch.allclose(a, b)
 
 
+def test_own_warm_samples_only_people_told_what_to_do_again(models, monkeypatch):
+    """``sflow.own_warm``: a person 2..N with an own prompt is sampled again from 0.5 on the
+    path to the P-Flow's motion for the scene and that prompt (6 NFE, then 2 S-Flow steps);
+    people without one, and scenes without own prompts, are exactly the cold model's."""
+    import umf.warm_start
+
+    cold, told = models["cold"], models["told"]
+    assert np.array_equal(_scene(cold).joints, _scene(told).joints)
+    own = [None, "waves with the right hand"]
+    seen = []
+    real = umf.warm_start.pflow_proposal
+
+    def spy(pipe, decoded, text, uncond, generator, guidance, own_text):
+        seen.append(own_text)
+        return real(pipe, decoded, text, uncond, generator, guidance, own_text)
+
+    monkeypatch.setattr(umf.warm_start, "pflow_proposal", spy)
+    a, b = _scene(cold, own=own), _scene(told, own=own)
+    assert len(seen) == 1 and "person_text" in seen[0]  # person 2 only: person 3 has none
+    assert np.array_equal(a.joints[0], b.joints[0])
+    assert not np.allclose(a.joints[1], b.joints[1])
+    assert b.meta["nfe"] == a.meta["nfe"] + 6 + 2
+    assert np.array_equal(_scene(told, own=own).joints, b.joints)  # seeded
+
+
 def test_the_proposal_matters(models, monkeypatch):
     """The second pass starts from what :func:`umf.warm_start.proposal` returns."""
     import umf.warm_start
@@ -127,6 +156,19 @@ def test_warm_start_out_of_range_is_refused(value):
     cfg = set_option(tiny_config(), f"sflow.warm_start={value}")
     with pytest.raises(UMFError, match="warm_start"):
         check_config_values(cfg)
+
+
+@pytest.mark.parametrize(("option", "match"), [
+    ("sflow.own_warm=1.0", "own_warm"), ("sflow.own_warm=-0.5", "own_warm"),
+    ("pflow.person_composition=or", "person_composition"),
+])  # fmt: skip
+def test_own_prompt_options_out_of_range_are_refused(option, match):
+    from conftest import tiny_config
+    from umf.config import set_option
+    from umf.model_checks import check_config_values
+
+    with pytest.raises(UMFError, match=match):
+        check_config_values(set_option(tiny_config(), option))
 
 
 def _gait(planted: bool, speed: float = 1.2, frames: int = 61, fps: float = 30.0):

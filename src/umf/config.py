@@ -152,6 +152,13 @@ class PFlowConfig:
     # CFG scale of an own prompt, apart from the scene prompt's (None: the same scale):
     # v_u + guidance * (v_scene - v_u) + person_guidance * (v_both - v_scene)
     person_guidance: float | None = None
+    # how an own prompt joins the scene's when sampling (umf.flows.composed_guidance):
+    # "joint" guides scene + own against the scene alone; "and" conjoins the own prompt as
+    # a prompt alone, v_u + guidance (v_scene - v_u) + person_guidance (v_own - v_u). Under
+    # "Two people stand facing each other." the joint form bowed 3-9 cm for "Someone bows
+    # politely." (1 of 8 seeds past 8 cm), the conjoined one 13-27 cm (8 of 8;
+    # results/umf-small-bandai-20261207)
+    person_composition: str = "joint"
     # loss scale of the single-person corpus (the authors': 0.1 for HumanML3D's size); the
     # small family uses 1: on Bandai the actions and gestures are in the single clips
     single_person_weight: float = 0.1
@@ -209,6 +216,12 @@ class SFlowConfig:
     # do not); a bank without velocities (written before them) is used without it
     warm_pace: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
+    # > 0: a person 2..N with an own prompt is sampled again from this time on the path
+    # towards the P-Flow's motion for the scene and own prompt (warm_proposal "pflow",
+    # whatever warm_proposal says for the others), every such person, gliding or not: the
+    # S-Flow's own prompts, trained beside scene captions that name no gesture, raise no
+    # hands (results/umf-small-bandai-20261204c); the P-Flow's do (umf.warm_start)
+    own_warm: float = 0.0
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction
     # start (reaction_noise) lost where person 2 stands (results/flows-long-h200-20261126)

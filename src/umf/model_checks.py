@@ -28,6 +28,7 @@ CHOICES = {
     "text_encoder": ("minilm", "clip", "clip-tokens"),
     "family": ("paper", "small"),
     "warm_proposal": ("pflow", "retrieved"),
+    "person_composition": ("joint", "and"),
 }
 
 
@@ -43,7 +44,7 @@ _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats >
 
 
 _FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop", "p_scene_drop",
-              "foot_loss_min_t", "warm_start"}  # fmt: skip  # floats in [0, 1]
+              "foot_loss_min_t", "warm_start", "own_warm"}  # fmt: skip  # floats in [0, 1]
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -127,8 +128,9 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if config.sflow.warm_neighbours < 1:
             raise UMFError(f"sflow.warm_neighbours must be at least 1, got "
                            f"{config.sflow.warm_neighbours}")  # fmt: skip
-        if config.sflow.warm_start >= 1.0:
-            raise UMFError(f"sflow.warm_start must be below 1, got {config.sflow.warm_start}")
+        for name in ("warm_start", "own_warm"):
+            if getattr(config.sflow, name) >= 1.0:
+                raise UMFError(f"sflow.{name} must be below 1, got {getattr(config.sflow, name)}")
         for stage in ("train_vae", "train_pflow"):  # the loss on decoded feet is the S-Flow's
             if getattr(config, stage).foot_loss:
                 raise UMFError(f"{stage}.foot_loss: only train_sflow has a foot loss")

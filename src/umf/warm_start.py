@@ -27,6 +27,13 @@ gesture does not glide, and a proposal from elsewhere only costs it its fit to t
 (its decoded path keeps pace and direction where its legs do not): pelvis velocities in
 person 1's frame within that fraction of the first pass's. A person for whom the bank has
 none keeps the first pass (:func:`warm_rows`).
+
+``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
+that time towards the P-Flow's motion for the scene and own prompt (:func:`pflow_proposal`),
+whether the first pass glides or not. The S-Flow's own-prompt head learned beside scene
+captions that never name a gesture, and its person 2 told "A person raises both hands."
+kept its wrists below its head; the P-Flow, which learned the single clips' captions,
+raises them. The S-Flow's second pass keeps the context's place and timing.
 """
 
 from __future__ import annotations
@@ -99,7 +106,7 @@ def proposal(
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
     took, and (B,) whether it fits the row (a retrieved one at the first pass's pace, with
     ``sflow.warm_pace``; module notes)."""
-    cfg, frames = pipe.config.sflow, decoded.shape[1]
+    cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
             raise UMFError(
@@ -108,21 +115,36 @@ def proposal(
             )
         prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
         velocity = floor_velocity(decoded, pipe.config.fps) if cfg.warm_pace > 0 else None
-        z, fits = pipe.reactions.nearest(first, frames, cfg.warm_neighbours, generator,
+        z, fits = pipe.reactions.nearest(first, decoded.shape[1], cfg.warm_neighbours, generator,
                                          pipe.sflow.latent_norm.normalize, prompt,
                                          cfg.warm_shortlist, velocity, cfg.warm_pace)  # fmt: skip
         return z, 0, fits
+    z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
+    return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
+
+
+def pflow_proposal(
+    pipe: Any,
+    decoded: Tensor,
+    text: Any,
+    uncond: Any,
+    generator: Any,
+    guidance: float | None,
+    own: dict[str, Any],
+) -> tuple[Tensor, int]:
+    """The P-Flow's motion for the prompt and ``own`` (the person's own prompt, composed as
+    ``pflow.person_composition`` says), moved rigidly on the floor onto where each row of
+    ``decoded`` (B, T, 262) starts: its latent (B, p, r) and the NFE."""
     z, nfe = pipe.pflow.sample(
         text,
         uncond,
-        dataset=torch.ones(first.shape[0], dtype=torch.long, device=first.device),
+        dataset=torch.ones(decoded.shape[0], dtype=torch.long, device=pipe.device),
         steps=pipe.config.pflow.steps,
         guidance=FROM_CONFIG if guidance is None else guidance,
         generator=generator,
         **own,
     )
-    fits = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
-    return pipe._encode(move_onto(pipe.decode(z, frames), decoded)), nfe, fits
+    return pipe._encode(move_onto(pipe.decode(z, decoded.shape[1]), decoded)), nfe
 
 
 def warm_rows(decoded: Tensor, fits: Tensor, fps: float, glide: float) -> Tensor:
@@ -155,6 +177,11 @@ def sample_added(
     kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
     cfg = pipe.config.sflow
+    if own and cfg.own_warm:  # told what to do: from the P-Flow's motion for it, every row
+        decoded = pipe.decode(w, frames, reaction=True)
+        guess, m = pflow_proposal(pipe, decoded, text, uncond, generator, pflow_guidance, own)
+        w, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, warm_t=cfg.own_warm, **kw)
+        return w, nfe + m + n
     if cfg.warm_start:
         decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
         guess, m, fits = proposal(pipe, w, decoded, text, uncond, generator, pflow_guidance, own)

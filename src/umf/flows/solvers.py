@@ -173,12 +173,19 @@ def composed_guidance(
     both: Mapping[str, Any],
     scene: Mapping[str, Any],
     uncond: Mapping[str, Any],
+    conjoin: bool = False,
 ) -> Velocity:
     """Guidance over two prompts, each with its own scale (compositional CFG):
     v_u + scale * (v_scene - v_u) + own_scale * (v_both - v_scene), where ``scene`` is the
     scene prompt alone and ``both`` adds each person's own prompt. One forward over the
     tripled batch [both; scene; uncond]; with ``own_scale == scale`` it is plain CFG of
-    ``both`` against ``uncond``, so the own prompt's pull is set apart from the scene's."""
+    ``both`` against ``uncond``, so the own prompt's pull is set apart from the scene's.
+
+    ``conjoin``: ``both`` is the own prompt alone, as a prompt in its own right, and the two
+    are conjoined (the AND of composable diffusion, Liu et al. 2022):
+    v_u + scale * (v_scene - v_u) + own_scale * (v_own - v_u). Each prompt then pulls from
+    nothing rather than the own prompt from the scene's, so a scene prompt that already says
+    much ("stand facing each other") no longer mutes a gesture its network reads well alone."""
     if not set(both) == set(scene) == set(uncond):
         raise ValueError("both, scene and uncond must have the same keys")
 
@@ -188,6 +195,6 @@ def composed_guidance(
         dup = {k: _repeat(v, b, 3) for k, v in shared.items()}
         out = velocity(torch.cat([x, x, x], 0), torch.cat([t, t, t], 0), **dup, **three)
         v_both, v_scene, v_u = out[:b], out[b : 2 * b], out[2 * b :]
-        return v_u + scale * (v_scene - v_u) + own_scale * (v_both - v_scene)
+        return v_u + scale * (v_scene - v_u) + own_scale * (v_both - (v_u if conjoin else v_scene))
 
     return guided

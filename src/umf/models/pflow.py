@@ -91,12 +91,13 @@ def _stage_field(
     uncond: dict[str, Any],
     scene: dict[str, Any] | None = None,
     own_scale: float | None = None,
+    conjoin: bool = False,
 ) -> Callable[..., Tensor]:
     """The velocity field the pyramid sampler integrates, guided per stage by ``scales``
     (coarse -> fine; stage K is the coarsest, stage 1 the finest). ``scene``: the scene
-    prompt alone, when ``cond`` adds an own prompt: then each guided stage guides the own
-    prompt by ``own_scale`` (None: the stage's scale) apart from the scene's
-    (:func:`umf.flows.composed_guidance`)."""
+    prompt alone, when ``cond`` adds an own prompt (``conjoin``: is the own prompt alone):
+    then each guided stage guides the own prompt by ``own_scale`` (None: the stage's scale)
+    apart from the scene's (:func:`umf.flows.composed_guidance`)."""
 
     def plain(x: Tensor, t: Tensor, **shared: Any) -> Tensor:
         return net(x, t, **shared, **cond)
@@ -105,7 +106,7 @@ def _stage_field(
         if scene is None:
             return classifier_free_guidance(net, s, cond, uncond)
         return composed_guidance(net, s, s if own_scale is None else own_scale, cond, scene,
-                                 uncond)  # fmt: skip
+                                 uncond, conjoin)  # fmt: skip
 
     fields: dict[float | None, Callable[..., Tensor]] = {
         s: plain if s is None else guided(s) for s in set(scales)
@@ -118,6 +119,14 @@ def _stage_field(
         return fields[scales[k - int(stage[0])]](x, t, stage=stage, **shared)
 
     return field
+
+
+def _own_alone(own: Tensor, scene: Tensor, present: Tensor | None) -> Tensor:
+    """The own prompt's text token per row, the scene's where a row has no own prompt."""
+    if present is None:
+        return own
+    keep = present.to(own.device, torch.bool).reshape(-1, *[1] * (own.dim() - 1))
+    return torch.where(keep, own, scene)
 
 
 class PFlow(nn.Module):
@@ -243,6 +252,8 @@ class PFlow(nn.Module):
         with per-person prompts); a guided stage then guides the scene prompt by its scale
         and the own prompt by ``person_guidance`` (None: the same), one forward over three
         batches (:func:`umf.flows.composed_guidance`); the unconditional side has neither.
+        With ``person_composition`` "and" the own prompt is conjoined as a prompt alone
+        (its token through the scene's text head) rather than added to the scene's.
 
         Defaults come from the config (per stage: :func:`stage_scales`); ``guidance`` None
         or 1.0 disables CFG, and ``uncond_text`` is needed only when some stage is guided.
@@ -264,11 +275,16 @@ class PFlow(nn.Module):
             cond: dict[str, Any] = {"text": scene_token}
             if person_text is not None:
                 cond["text"] = scene_token + self.net.person_token(person_text, b, person_present)
+            scales = stage_scales(self.cfg, guidance)
+            conjoin = (person_text is not None and self.cfg.person_composition == "and"
+                       and any(s is not None for s in scales))  # fmt: skip
+            if conjoin:  # the own prompt through the scene's text head, as a prompt alone
+                cond["text"] = _own_alone(self.net.encode_text(person_text), scene_token,
+                                          person_present)  # fmt: skip
             if self.net.num_datasets > 0:
                 ds = torch.as_tensor(dataset, dtype=torch.long, device=param.device)
                 ds = ds.expand(b) if ds.dim() == 0 else ds.repeat_interleave(num_samples)
                 cond["dataset"] = ds
-            scales = stage_scales(self.cfg, guidance)
             uncond: dict[str, Any] = {}
             if any(s is not None for s in scales):
                 if uncond_text is None:
@@ -279,7 +295,8 @@ class PFlow(nn.Module):
             scene = None  # an own prompt is guided apart from the scene's
             if person_text is not None and uncond:
                 scene = {**cond, "text": scene_token}
-            field = _stage_field(self.net, scales, cond, uncond, scene, self.cfg.person_guidance)
+            field = _stage_field(self.net, scales, cond, uncond, scene, self.cfg.person_guidance,
+                                 conjoin)  # fmt: skip
             k = self.pyramid.num_stages
             noise = initial_noise(
                 self.pyramid,

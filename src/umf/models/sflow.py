@@ -207,11 +207,12 @@ class SFlow(nn.Module):
         person_text: TextFeatures | None = None,
         person_present: Tensor | None = None,
         warm: Tensor | None = None,
+        warm_t: float | None = None,
     ) -> tuple[Tensor, int]:
         """The next person's latent (B, p, r) and the NFE, integrating the ODE once.
 
         ``warm`` (B, p, r) on the VAE's scale: a proposed reaction to start from at
-        ``warm_start`` (:func:`umf.flows.warm_state`; ignored when that is 0).
+        ``warm_t`` (None: ``warm_start``; :func:`umf.flows.warm_state`; ignored when 0).
 
         Defaults come from the config; ``guidance`` None or 1.0 disables CFG (the
         unconditional side has neither prompt). ``person_text`` / ``person_present``: the
@@ -249,6 +250,6 @@ class SFlow(nn.Module):
                 cond={**cond, "context": context},  # beside the state (context_condition)
                 reaction_noise=self.cfg.reaction_noise,
                 warm=None if warm is None else self.latent_norm.normalize(warm),
-                warm_t=self.cfg.warm_start,
+                warm_t=self.cfg.warm_start if warm_t is None else warm_t,
             )
         return self.latent_norm.denormalize(w), nfe
