@@ -107,8 +107,9 @@ def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models, monke
 
 def test_own_warm_samples_only_people_told_what_to_do_again(models, monkeypatch):
     """``sflow.own_warm``: a person 2..N with an own prompt is sampled again from 0.5 on the
-    path to the P-Flow's motion for the scene and that prompt (6 NFE, then 2 S-Flow steps);
-    people without one, and scenes without own prompts, are exactly the cold model's."""
+    path to the P-Flow's single-person motion for that prompt alone (6 NFE, then 2 S-Flow
+    steps); people without one, and scenes without own prompts, are exactly the cold
+    model's."""
     import umf.warm_start
 
     cold, told = models["cold"], models["told"]
@@ -117,13 +118,16 @@ def test_own_warm_samples_only_people_told_what_to_do_again(models, monkeypatch)
     seen = []
     real = umf.warm_start.pflow_proposal
 
-    def spy(pipe, decoded, text, uncond, generator, guidance, own_text):
-        seen.append(own_text)
-        return real(pipe, decoded, text, uncond, generator, guidance, own_text)
+    def spy(pipe, decoded, text, uncond, generator, guidance, own_text, dataset=1):
+        seen.append((text, own_text, dataset))
+        return real(pipe, decoded, text, uncond, generator, guidance, own_text, dataset)
 
     monkeypatch.setattr(umf.warm_start, "pflow_proposal", spy)
     a, b = _scene(cold, own=own), _scene(told, own=own)
-    assert len(seen) == 1 and "person_text" in seen[0]  # person 2 only: person 3 has none
+    assert len(seen) == 1  # person 2 only: person 3 has no own prompt
+    text, own_text, dataset = seen[0]
+    want = told.text_encoder.encode(["waves with the right hand"]).tokens
+    assert torch.equal(text.tokens[:1], want) and own_text == {} and dataset == 0
     assert np.array_equal(a.joints[0], b.joints[0])
     assert not np.allclose(a.joints[1], b.joints[1])
     assert b.meta["nfe"] == a.meta["nfe"] + 6 + 2

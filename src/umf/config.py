@@ -217,10 +217,10 @@ class SFlowConfig:
     warm_pace: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # > 0: a person 2..N with an own prompt is sampled again from this time on the path
-    # towards the P-Flow's motion for the scene and own prompt (warm_proposal "pflow",
-    # whatever warm_proposal says for the others), every such person, gliding or not: the
-    # S-Flow's own prompts, trained beside scene captions that name no gesture, raise no
-    # hands (results/umf-small-bandai-20261204c); the P-Flow's do (umf.warm_start)
+    # towards the P-Flow's single-person motion for that prompt alone (whatever
+    # warm_proposal says for the others), every such person, gliding or not: the S-Flow's
+    # own prompts, trained beside scene captions that name no gesture, raise no hands
+    # (results/umf-small-bandai-20261204c); the P-Flow's do (umf.warm_start)
     own_warm: float = 0.0
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction
