@@ -45,7 +45,7 @@ def leader_speeds(pipe, corpus_dir: Path) -> dict[int, torch.Tensor]:
             if f.shape[1] == frames:
                 people.extend(f[1:])
                 leaders.extend([f[0]] * (f.shape[0] - 1))
-        keep = np.sort(rng.permutation(len(people))[:len(pipe.reactions.latents[frames])])
+        keep = np.sort(rng.permutation(len(people))[: len(pipe.reactions.latents[frames])])
         mine = speed([people[i] for i in keep])
         if not torch.allclose(mine, pipe.reactions.velocities[frames], atol=2e-2):
             raise SystemExit(f"error: the bank of {frames} frames is not {corpus_dir}'s")

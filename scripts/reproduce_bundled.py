@@ -47,7 +47,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261206"
+NAME = "umf-small-bandai-20261207"
 
 
 def sets(prefix: str, **options: object) -> list[str]:
@@ -140,10 +140,11 @@ PERSON2 = [*sets("train_pflow", max_steps=800, lr=0.0002, real_repeats=60,
                  relation_repeats=["stand_facing=8"], val_every=500, ckpt_every=100)]  # fmt: skip
 
 
-# the last stage's sampling options (results/umf-small-bandai-20261204b, 20261206)
+# the last stage's sampling options (results/umf-small-bandai-20261204b, 20261206, 20261207)
 NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_start=0.5",
          "sflow.warm_proposal=retrieved", "sflow.warm_glide=0.3", "sflow.warm_pace=0.15",
-         "sflow.warm_shortlist=64"]  # fmt: skip
+         "sflow.warm_shortlist=64", "pflow.person_composition=and",
+         "sflow.own_warm=0.5"]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -242,7 +243,9 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(one_flow("person2", person / "model", "pflow,sflow", PERSON2))
     # results/umf-small-bandai-20261204b: own prompts guided at 3 apart from the scene's 2;
     # results/umf-small-bandai-20261206: gliding people 2..N warm-started from a real
-    # reaction travelling as they do, from the bank of the corpus's train scenes
+    # reaction travelling as they do, from the bank of the corpus's train scenes;
+    # results/umf-small-bandai-20261207: own prompts conjoined in the P-Flow, own-prompted
+    # people 2..N warm-started from the P-Flow's motion for their prompt
     name = variant("name", work / "runs" / "person2" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]
