@@ -9,7 +9,11 @@ measured on a model.
    person 2's head dropping more than 8 cm (``head_drop``); then the two prompts swapped.
    The same scene prompt without person prompts is the baseline (what each person does by
    chance).
-2. Per-person text matching (``--corpus``, :mod:`umf.eval.person_matching`): every test
+2. Re-rolled on command: each seed's scene without person prompts, person 2 re-rolled
+   (``pipe.reroll``, seed 100 + s) told to raise both hands, then to bow: person 1
+   bit-identical, person 2 changed, doing what it was told, and the two bodies' capsules
+   apart (``umf.eval.physics.interpenetration``).
+3. Per-person text matching (``--corpus``, :mod:`umf.eval.person_matching`): every test
    scene of the corpus whose people play different actions, generated from its first caption
    and each person's own prompt (seed 0, raw), each person scored by the bundled
    single-person evaluator against their own prompt and the other's; also for the
@@ -53,6 +57,31 @@ def gestures(pipe, seeds: int) -> dict:
     return out
 
 
+def rerolled(pipe, seeds: int) -> dict:
+    """Person 2 of each plain scene re-rolled with an own prompt (module notes, 2)."""
+    import numpy as np
+
+    from umf.eval.motion_stats import motion_statistics
+    from umf.eval.physics import interpenetration
+
+    scenes = pipe([SCENE] * seeds, num_people=2, seed=0, sample_indices=range(seeds))
+    out = {}
+    for name, own, did in (("hands", HANDS, lambda st: st["both_wrists_above_head"] > 0),
+                           ("bow", BOW, lambda st: st["head_drop"] > HEAD_DROP)):  # fmt: skip
+        rows = []
+        for s, scene in enumerate(scenes):
+            new = pipe.reroll(scene, 2, seed=100 + s, person_prompt=own)
+            a, b = np.asarray(scene.joints), np.asarray(new.joints)
+            pen = interpenetration(b[:2])[1]
+            rows.append({"p1_same": bool(np.array_equal(a[0], b[0])),
+                         "p2_new": not np.allclose(a[1], b[1]),
+                         "did": bool(did(motion_statistics(b[1]))),
+                         "penetration_cm": round(pen["penetration_max_cm"], 3)})  # fmt: skip
+        out[name] = {k: sum(r[k] for r in rows) for k in ("p1_same", "p2_new", "did")}
+        out[name]["max_penetration_cm"] = max(r["penetration_cm"] for r in rows)
+    return out
+
+
 def matching(pipe, corpus_dir: Path) -> dict:
     """Per-person top-1 of own prompt against the others' (:mod:`umf.eval.person_matching`)
     on the corpus's test scenes of different actions, and on its ``stand_facing`` ones."""
@@ -81,6 +110,10 @@ def report(m: dict) -> str:
         lines.append(f"  {name:10s} p1 raises hands {row['p1 hands']}/{n}, p2 bows "
                      f"{row['p2 bows']}/{n} | p1 bows {row['p1 bows']}/{n}, p2 raises hands "
                      f"{row['p2 hands']}/{n}")  # fmt: skip
+    for name, r in m.get("reroll", {}).items():
+        lines.append(f"  re-rolled p2 told {name}: p1 bit-identical {r['p1_same']}/{n}, p2 "
+                     f"changed {r['p2_new']}/{n}, did it {r['did']}/{n}, deepest overlap "
+                     f"{r['max_penetration_cm']} cm")  # fmt: skip
     for name, r in m.get("matching", {}).items():
         lines.append(f"  per-person matching, {name}: top-1 {r['top1']:.3f} +- {r['ci95']:.3f} "
                      f"over {r['people']} people of {r['scenes']} test scenes (chance "
@@ -99,6 +132,8 @@ def main() -> None:
 
     pipe = UMFPipeline.from_pretrained(args.model)
     m = {"model": pipe.name, "seeds": args.seeds, "gestures": gestures(pipe, args.seeds)}
+    if pipe.person_prompts:
+        m["reroll"] = rerolled(pipe, args.seeds)
     if args.corpus is not None and pipe.person_prompts:
         m["matching"] = matching(pipe, args.corpus)
     print(report(m))
