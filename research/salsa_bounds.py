@@ -2,6 +2,7 @@
 the S-Flow's partner beside a real leader, and the whole model.
 
     python research/salsa_bounds.py CORPUS [--model DIR] [--seeds 2]
+        [--train-crops-only [--sflow-steps S] [--guidance G]]
 
 4-second segments (121 frames, every 5 s, at most 4 per take) of the corpus's real salsa
 takes, in person 1's frame at their first frame; per row the medians of
@@ -114,13 +115,26 @@ def main() -> None:
     ap.add_argument("corpus", type=Path)
     ap.add_argument("--model", type=Path, default=None)
     ap.add_argument("--seeds", type=int, default=2, help="seeds per real leader (row 3)")
+    ap.add_argument("--train-crops-only", action="store_true", help="row 5 alone")
+    ap.add_argument("--sflow-steps", type=int, default=None, help="the S-Flow's steps for pairs")
+    ap.add_argument("--guidance", type=float, default=None, help="the S-Flow's guidance")
     args = ap.parse_args()
 
     from umf.data.corpus import Corpus
     from umf.pipeline import UMFPipeline
 
     pipe = UMFPipeline.from_pretrained(args.model)
+    if args.sflow_steps is not None:
+        pipe.config.sflow.pair_steps = args.sflow_steps
+    if args.guidance is not None:
+        pipe.config.sflow.guidance = args.guidance
     corpus = Corpus.load(args.corpus)
+    if args.train_crops_only:
+        real, partners = training_crops(pipe, corpus)
+        print(f"train crops ({len(real)}), real: {medians(real)}")
+        print(f"the S-Flow's partner (pair steps {pipe.config.sflow.steps_for(2)}, guidance "
+              f"{pipe.config.sflow.guidance}): {medians(partners)}")  # fmt: skip
+        return
     takes = [c for c in corpus.clips
              if c.num_people == 2 and "salsa" in " ".join(c.captions).lower()]  # fmt: skip
     print(f"model {pipe.name}; {len(takes)} salsa takes")
