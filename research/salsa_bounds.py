@@ -2,12 +2,13 @@
 the S-Flow's partner beside a real leader, and the whole model.
 
     python research/salsa_bounds.py CORPUS [--model DIR] [--seeds 2]
-        [--train-crops-only [--sflow-steps S] [--guidance G]]
+        [--train-crops-only [--sflow-steps S] [--guidance G]] [--push-only]
 
 4-second segments (121 frames, every 5 s, at most 4 per take) of the corpus's real salsa
 takes, in person 1's frame at their first frame; per row the medians of
 ``research/teach_report.py``'s closeness statistics (hands near: the share of frames with
-some wrists within 0.3 x stature; pelvises apart in statures; facing: the median cosine):
+some wrists within 0.3 x stature; pelvises apart in statures; facing: the median cosine),
+and the overlap (the mean share of frames whose bodies overlap by more than 1 cm):
 
 1. the real couples;
 2. both people encoded and decoded by the model's VAE (posterior mean, decoded as the
@@ -107,7 +108,10 @@ def beside_real(pipe, couples: list[np.ndarray], seeds: int, separate: bool) -> 
 
 
 def medians(rows: list[dict]) -> str:
-    return ", ".join(f"{k} {np.median([r[k] for r in rows]):.3f}" for k in KEYS)
+    """The closeness medians, and the bodies' overlap: the mean share of frames in which the
+    two people's capsules overlap by more than 1 cm (``umf.eval.physics``)."""
+    out = ", ".join(f"{k} {np.median([r[k] for r in rows]):.3f}" for k in KEYS)
+    return f"{out}, overlap {np.mean([r['penetration_frac'] for r in rows]):.3f}"
 
 
 def main() -> None:
@@ -118,7 +122,14 @@ def main() -> None:
     ap.add_argument("--train-crops-only", action="store_true", help="row 5 alone")
     ap.add_argument("--sflow-steps", type=int, default=None, help="the S-Flow's steps for pairs")
     ap.add_argument("--guidance", type=float, default=None, help="the S-Flow's guidance")
+    ap.add_argument("--push-only", action="store_true",
+                    help="the separation's push without its shortest-shift search (as "
+                    "before umf-small-bandai-20261207's session)")  # fmt: skip
     args = ap.parse_args()
+    if args.push_only:
+        import umf.separation
+
+        umf.separation.DIRECTIONS = 0  # no direction is searched: the push stays
 
     from umf.data.corpus import Corpus
     from umf.pipeline import UMFPipeline

@@ -124,3 +124,30 @@ def test_closest_joints_agrees_with_brute_force():
         else:  # not within: only said to be at least ``within`` (what the caller needs)
             assert d >= within
         assert np.isclose(closest_joints(a, b)[0], true.min())
+
+
+def test_the_smallest_shift_is_shorter_and_still_clears():
+    """``smallest`` (touching prompts): person 2's shift is never longer than the push, still
+    keeps every frame's pelvis ``min_distance`` and joints ``contact_distance`` from person
+    1, and is shorter in scenes where the worst frame points the push the long way out."""
+    from umf.separation import separation_shifts
+
+    rng = np.random.default_rng(3)
+    shorter = 0
+    for _ in range(12):
+        bodies = np.zeros((2, 6, 22, 3))
+        bodies[..., 1] = np.linspace(0.0, 1.7, 22)
+        bodies[0, :, :, [0, 2]] = rng.normal(0.0, 0.02, (2, 6, 1))  # person 1 about the origin
+        bodies[1, :, :, [0, 2]] = rng.normal(0.0, 0.25, (2, 6, 1))  # person 2 roams through
+        bodies[:, :, 5:, 0] += rng.normal(0.0, 0.15, (2, 6, 17))  # arms reach out sideways
+        pelvis = bodies[:, :, 0, [0, 2]]
+        kw = {"bodies": bodies, "contact_distance": 0.1}
+        push = separation_shifts(pelvis, 0.29, **kw)
+        small = separation_shifts(pelvis, 0.29, smallest=True, **kw)
+        assert np.linalg.norm(small[1]) <= np.linalg.norm(push[1]) + 1e-12
+        placed = bodies + np.stack([small[:, 0], np.zeros(2), small[:, 1]], -1)[:, None, None]
+        assert closest_gap(placed) >= 0.1 - 1e-9
+        gap = np.linalg.norm(placed[1, :, 0, [0, 2]] - placed[0, :, 0, [0, 2]], axis=0)
+        assert gap.min() >= 0.29 - 1e-9
+        shorter += np.linalg.norm(small[1]) < 0.95 * np.linalg.norm(push[1])
+    assert shorter >= 3, shorter
