@@ -144,7 +144,7 @@ PERSON2 = [*sets("train_pflow", max_steps=800, lr=0.0002, real_repeats=60,
 NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_start=0.5",
          "sflow.warm_proposal=retrieved", "sflow.warm_glide=0.3", "sflow.warm_pace=0.15",
          "sflow.warm_shortlist=64", "pflow.person_composition=and",
-         "sflow.own_warm=0.5"]  # fmt: skip
+         "sflow.own_warm=0.5", "sflow.warm_side=true"]  # fmt: skip
 
 
 class Stage(NamedTuple):

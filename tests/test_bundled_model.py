@@ -218,3 +218,16 @@ def test_each_person_does_what_their_own_prompt_says(pipe):
     assert sum(a and b for a, b in asked) >= 3, asked
     assert sum(a and b for a, b in swapped) >= 2, swapped
     assert sum(b for _, b in plain) == 0, plain
+
+
+def test_a_walker_keeps_the_side_the_prompt_names(pipe):
+    """``sflow.warm_side``: asked for person 2 on person 1's right (the composer's wording),
+    a walking pair puts it there in at least 3 of seeds 0-3 (8 of 8 seeds measured;
+    20261206, which put person 2 on the left whatever the prompt said, 1 of 8;
+    results/umf-small-bandai-20261207, research/side_named.py)."""
+    from umf.data.relations import lateral_offset
+
+    prompt = "Two people walk side by side, the second person on the first one's right."
+    scenes = pipe([prompt] * 4, num_people=2, seed=0, sample_indices=range(4))
+    right = [lateral_offset(np.asarray(s.raw_joints), 0, 1, 0)[0] < -0.2 for s in scenes]
+    assert sum(right) >= 3, right

@@ -128,8 +128,8 @@ def test_the_pipeline_warm_starts_from_a_real_reaction(corpus, model, tmp_path, 
     proposals = []
     real = umf.warm_start.proposal
 
-    def seen(*args):
-        z, nfe, fits = real(*args)
+    def seen(*args, **kw):
+        z, nfe, fits = real(*args, **kw)
         proposals.append(z)
         return z, nfe, fits
 
@@ -367,3 +367,31 @@ def test_a_legacy_bank_with_a_caption_per_reaction_loads_and_bad_rows_are_refuse
                   str(tmp_path / REACTIONS))  # fmt: skip
         with pytest.raises(UMFError, match="corrupt reaction bank"):
             ReactionBank.load(tmp_path)
+
+
+def test_a_prompt_naming_a_side_retrieves_reactions_on_that_side():
+    """``mirror``: only captions at least as near the prompt as its mirror image compete, so
+    the retrieval keeps to the named side even when the other side's reaction is the nearest
+    in latent space; captions naming no side stay in; a prompt that is its own mirror image
+    changes nothing. The composer's captions, embedded by the tests' text encoder."""
+    from umf.coverage import embed
+    from umf.text import mirror_caption
+
+    encoder = FakeText()
+    left = "Two people walk side by side, the second person on the first one's left."
+    right, plain = mirror_caption(left), "Two people walk side by side."
+    captions = embed(encoder, [left, right, plain])  # unit rows
+    g = torch.Generator().manual_seed(6)
+    latents = torch.randn(3, P, R, generator=g)
+    bank = ReactionBank({30: latents}, {30: captions})
+    query = latents[[1]] + 0.01  # nearest in latent space: the reaction on the right
+    prompt, mirror = embed(encoder, [left]), embed(encoder, [right])
+    near = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3)[0]
+    assert torch.equal(near, latents[[1]])
+    sided = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3, mirror=mirror)[0]
+    kept = [i for i in range(3) if float(captions[i] @ prompt[0]) >= float(captions[i] @ mirror[0])]
+    assert 1 not in kept and 0 in kept
+    d = torch.cdist(query.flatten(1), latents[kept].flatten(1))
+    assert torch.equal(sided, latents[kept][d.argmin(dim=1)])
+    assert torch.equal(bank.nearest(query, 30, 1, prompt=embed(encoder, [plain]), shortlist=3,
+                                    mirror=embed(encoder, [plain]))[0], latents[[1]])  # fmt: skip

@@ -87,9 +87,9 @@ def test_warm_start_passes_each_persons_own_prompt_to_the_proposal(models, monke
 
     real, seen = umf.warm_start.proposal, []
 
-    def spy(pipe, first, decoded, text, uncond, generator, guidance, own):
+    def spy(pipe, first, decoded, text, uncond, generator, guidance, own, **kw):
         seen.append(own)
-        return real(pipe, first, decoded, text, uncond, generator, guidance, own)
+        return real(pipe, first, decoded, text, uncond, generator, guidance, own, **kw)
 
     monkeypatch.setattr(umf.warm_start, "proposal", spy)
     _scene(models["warm"], people=2, own=[None, "waves with the right hand"])
@@ -141,8 +141,8 @@ def test_the_proposal_matters(models, monkeypatch):
     base = _scene(models["warm"], people=2)
     real = umf.warm_start.proposal
 
-    def shifted(pipe, first, *args):
-        z, nfe, fits = real(pipe, first, *args)
+    def shifted(pipe, first, *args, **kw):
+        z, nfe, fits = real(pipe, first, *args, **kw)
         return z + 1.0, nfe, fits
 
     monkeypatch.setattr(umf.warm_start, "proposal", shifted)
@@ -271,3 +271,19 @@ def test_warm_rows_takes_gliding_people_the_proposal_fits(models, monkeypatch):
         assert proposal(pipe, first, decoded, text, uncond, gens, None, {})[2].all()
     finally:
         cfg.warm_pace, cfg.warm_proposal, pipe.reactions = old
+
+
+def test_mirror_text_encodes_the_prompts_with_their_sides_swapped(models, monkeypatch):
+    """``sflow.warm_side``: the prompts' mirror images, encoded, when some prompt names a
+    side; None when off or when none does."""
+    from umf.text import mirror_caption
+    from umf.warm_start import mirror_text
+
+    pipe = models["warm"]
+    words = ["two people walk side by side, the second on the left", "two people bow"]
+    assert mirror_text(pipe, words) is None  # off
+    monkeypatch.setattr(pipe.config.sflow, "warm_side", True)
+    assert mirror_text(pipe, ["two people bow"]) is None  # no side named
+    got = mirror_text(pipe, words)
+    want = pipe.text_encoder.encode([mirror_caption(w) for w in words])
+    assert torch.equal(got.tokens, want.tokens) and "right" in mirror_caption(words[0])

@@ -216,6 +216,9 @@ class SFlowConfig:
     # do not); a bank without velocities (written before them) is used without it
     warm_pace: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
+    # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
+    # as near it as its mirror image (side words swapped): people on the side it names
+    warm_side: bool = False
     # > 0: a person 2..N with an own prompt is sampled again from this time on the path
     # towards the P-Flow's single-person motion for that prompt alone (whatever
     # warm_proposal says for the others), every such person, gliding or not: the S-Flow's

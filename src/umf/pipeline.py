@@ -67,7 +67,7 @@ from umf.validation import (
     chunk_size,
     chunks,
 )
-from umf.warm_start import sample_added
+from umf.warm_start import mirror_text, sample_added
 
 __all__ = ["MAX_PEOPLE", "Scene", "UMFPipeline", "default_model_dir"]  # Scene: umf.scene
 
@@ -313,8 +313,9 @@ class UMFPipeline:
         num_people, guidance = req.num_people, req.guidance
         gen = scene_generators(seed, indices, self.device)
         b = len(prompts)
-        text = self.text_encoder.encode([respell_prompt(p, self.config.text.respell)
-                                         for p in prompts]).to(self.device)  # fmt: skip
+        words = [respell_prompt(p, self.config.text.respell) for p in prompts]
+        text = self.text_encoder.encode(words).to(self.device)
+        mirror = mirror_text(self, words) if num_people > 1 else None
         uncond = self.text_encoder.encode([""] * b).to(self.device)
         nfe = 0
         frame = None
@@ -352,7 +353,7 @@ class UMFPipeline:
                 steps=req.sflow_steps or self.config.sflow.steps_for(num_people),
                 guidance=self.config.sflow.guidance if guidance is None else guidance,
                 generator=gen, own=person_text(self, req.person_prompts, k, b),
-                pflow_guidance=guidance,
+                pflow_guidance=guidance, mirror=mirror,
             )  # fmt: skip
             nfe += n
             latents.append(w)

@@ -36,6 +36,9 @@ CAPTION = "caption_"  # ... and each reaction's row of them (N,), per length
 # otherwise match no reaction but its own standstill
 PACE_FLOOR = 0.5
 VELOCITY = "velocity_"
+# how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
+# on its side: equal within float error (captions naming no side are as near both)
+SAME_SIDE = 1e-5
 
 Tensor = torch.Tensor
 
@@ -135,15 +138,22 @@ class ReactionBank:
         return self._gap(length, velocity) <= tolerance
 
     def _shortlisted(self, length: int, prompt: Tensor | None, shortlist: int,
-                     like: Tensor) -> Tensor | None:  # fmt: skip
+                     like: Tensor, mirror: Tensor | None = None) -> Tensor | None:  # fmt: skip
         """(B, N) the ``shortlist`` reactions whose captions are nearest each row's prompt
         (B, D), or None where every reaction competes (no prompt, no shortlist, or a bank
-        without captions)."""
+        without captions). ``mirror`` (B, D): each prompt with its side words swapped; then
+        only captions at least as near the prompt as its mirror image compete."""
         if prompt is None or shortlist <= 0 or length not in self.texts:
             return None
-        sims = prompt.to(like) @ self.texts[length].to(like).T  # (B, N)
+        captions = self.texts[length].to(like)
+        sims = prompt.to(like) @ captions.T  # (B, N)
+        if mirror is not None:  # the other side's captions are nearer the mirror image
+            same = sims >= mirror.to(like) @ captions.T - SAME_SIDE
+            same[~same.any(dim=1)] = True  # no caption on a row's side: every caption
+            sims = sims.masked_fill(~same, -torch.inf)
         keep = sims.topk(min(shortlist, sims.shape[1]), dim=1).indices
-        return torch.zeros(sims.shape, dtype=torch.bool, device=sims.device).scatter(1, keep, True)
+        chosen = torch.zeros(sims.shape, dtype=torch.bool, device=sims.device)
+        return chosen.scatter(1, keep, True) & torch.isfinite(sims)
 
     def nearest(
         self,
@@ -156,6 +166,7 @@ class ReactionBank:
         shortlist: int = 0,
         velocity: Tensor | None = None,
         pace: float = 0.0,
+        mirror: Tensor | None = None,
     ) -> tuple[Tensor, Tensor]:
         """For each row of ``query`` (B, p, r) a real reaction (B, p, r): one of the
         ``neighbours`` nearest (Euclidean after ``scale``, e.g. the S-Flow's latent
@@ -166,15 +177,22 @@ class ReactionBank:
         among those whose pelvis velocity is within ``pace`` x the row's speed (at least
         ``PACE_FLOOR``) of it (speed and direction in person 1's frame), and the
         ``neighbours`` nearest in velocity where fewer are (a bank without velocities ignores
-        them). Also (B,) whether each row had one within its pace (all True without a pace),
-        so a caller can keep what it had rather than take a reaction at the wrong pace."""
+        them). ``mirror`` (B, D): the prompts' mirror images (their side words swapped,
+        :func:`umf.text.mirror_caption`), unit embeddings: the shortlist then holds only
+        reactions whose captions are at least as near the prompt as its mirror image, so a
+        prompt naming a side retrieves people on that side (a prompt naming none is its own
+        mirror image: no change). Also (B,) whether each row had one within its pace (all
+        True without a pace), so a caller can keep what it had rather than take a reaction at
+        the wrong pace."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
-        allowed = self._shortlisted(length, prompt, shortlist, d)
+        allowed = self._shortlisted(length, prompt, shortlist, d, mirror)
         if allowed is not None:
             d = d.masked_fill(~allowed, float("inf"))
         k = max(1, min(int(neighbours), bank.shape[0] if allowed is None else shortlist))
+        if allowed is not None:  # never more than every row's shortlist holds
+            k = max(1, min(k, int(allowed.sum(dim=1).min())))
         at_pace = torch.ones(query.shape[0], dtype=torch.bool, device=query.device)
         if velocity is not None and pace > 0 and length in self.velocities:
             velocity = velocity.to(d)

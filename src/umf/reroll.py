@@ -34,7 +34,7 @@ from umf.separation import separate_people, touching_distances
 from umf.streams import scene_generators
 from umf.text import respell_prompt
 from umf.validation import check_int, check_request, check_text
-from umf.warm_start import sample_added
+from umf.warm_start import mirror_text, sample_added
 
 
 def check_reroll(scene: Scene, person: int, fps: float, max_frames: int) -> None:
@@ -110,7 +110,7 @@ def reroll_person(
             pipe, context, mask, cond, uncond, t, steps=steps,
             guidance=cfg.sflow.guidance if guidance is None else guidance,
             generator=scene_generators(seed, [0], device), own=person_kw,
-            pflow_guidance=guidance,
+            pflow_guidance=guidance, mirror=mirror_text(pipe, [words]),
         )  # fmt: skip
         new = transform_features(pipe.decode(w, t, reaction=True)[0].cpu(), frame, inverse=True)
     decoded = features_to_joints_integrated(new).numpy()  # (T, 22, 3), one frame added

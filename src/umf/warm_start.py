@@ -26,7 +26,9 @@ gesture does not glide, and a proposal from elsewhere only costs it its fit to t
 ``sflow.warm_pace`` > 0 retrieves only real reactions that travel as the first pass does
 (its decoded path keeps pace and direction where its legs do not): pelvis velocities in
 person 1's frame within that fraction of the first pass's. A person for whom the bank has
-none keeps the first pass (:func:`warm_rows`).
+none keeps the first pass (:func:`warm_rows`). ``sflow.warm_side`` retrieves, for a prompt
+that names a side ("... the second person on the first one's left."), only reactions whose
+captions are at least as near the prompt as its mirror image: people on that side.
 
 ``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
 that time towards the P-Flow's single-person motion for the own prompt alone
@@ -51,6 +53,7 @@ from umf.models.denoiser import FROM_CONFIG
 from umf.reaction_bank import REACTIONS
 from umf.representation import features_to_joints, leader_frame, transform_features
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
+from umf.text import mirror_caption
 
 Tensor = torch.Tensor
 
@@ -106,11 +109,13 @@ def proposal(
     generator: Any,
     guidance: float | None,
     own: dict[str, Any],
+    mirror: Any = None,
 ) -> tuple[Tensor, int, Tensor]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
     took, and (B,) whether it fits the row (a retrieved one at the first pass's pace, with
-    ``sflow.warm_pace``; module notes)."""
+    ``sflow.warm_pace``; module notes). ``mirror``: the prompts' mirror images
+    (:func:`mirror_text`), for retrieval on the side a prompt names."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -118,11 +123,14 @@ def proposal(
                 f"the model {pipe.name} has sflow.warm_proposal 'retrieved' but no "
                 f"{REACTIONS} (umf train reactions --model DIR --corpus CORPUS)"
             )
-        prompt = torch.nn.functional.normalize(text.pooled.float(), dim=-1)
+        unit = torch.nn.functional.normalize
+        prompt = unit(text.pooled.float(), dim=-1)
+        side = None if mirror is None else unit(mirror.pooled.float(), dim=-1)
         velocity = floor_velocity(decoded, pipe.config.fps) if cfg.warm_pace > 0 else None
         z, fits = pipe.reactions.nearest(first, decoded.shape[1], cfg.warm_neighbours, generator,
                                          pipe.sflow.latent_norm.normalize, prompt,
-                                         cfg.warm_shortlist, velocity, cfg.warm_pace)  # fmt: skip
+                                         cfg.warm_shortlist, velocity, cfg.warm_pace,
+                                         side)  # fmt: skip
         return z, 0, fits
     z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
     return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
@@ -154,6 +162,18 @@ def pflow_proposal(
     return pipe._encode(move_onto(pipe.decode(z, decoded.shape[1]), decoded)), nfe
 
 
+def mirror_text(pipe: Any, words: list[str]) -> Any:
+    """With ``sflow.warm_side``, the prompts (as the text encoder reads them) with their side
+    words swapped (:func:`umf.text.mirror_caption`), encoded, for a retrieval on the side
+    each names; None when off or when no prompt names a side. The S-Flow does not learn
+    a named side from its captions (results/side-named-20261204); real reactions whose
+    captions name it stand there."""
+    if not pipe.config.sflow.warm_side:
+        return None
+    mirrored = [mirror_caption(w) for w in words]
+    return None if mirrored == list(words) else pipe.text_encoder.encode(mirrored).to(pipe.device)
+
+
 def warm_rows(decoded: Tensor, fits: Tensor, fps: float, glide: float) -> Tensor:
     """(B,) which first passes (``decoded`` (B, T, 262)) the second pass replaces: those the
     proposal ``fits``, and with ``glide`` > 0 (``sflow.warm_glide``) only those that glide
@@ -174,13 +194,14 @@ def sample_added(
     generator: Any,
     own: dict[str, Any],
     pflow_guidance: float | None,
+    mirror: Any = None,
 ) -> tuple[Tensor, int]:
     """The next person's latent (B, p, r) and the NFE, as the pipeline and re-rolls sample
     people 2..N: the S-Flow's pass and, with ``sflow.warm_start``, the pass again from its
     proposal for the rows :func:`warm_rows` takes (it runs for every row, so a row's draws
     never depend on its batch). ``own``: the person's own prompt
     (:func:`umf.person_prompts.person_text`); ``pflow_guidance``: the caller's guidance for
-    a P-Flow proposal (None: its config's)."""
+    a P-Flow proposal (None: its config's); ``mirror``: :func:`mirror_text` of the prompts."""
     kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
     cfg = pipe.config.sflow
@@ -192,7 +213,8 @@ def sample_added(
         return w, nfe + m + n
     if cfg.warm_start:
         decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
-        guess, m, fits = proposal(pipe, w, decoded, text, uncond, generator, pflow_guidance, own)
+        guess, m, fits = proposal(pipe, w, decoded, text, uncond, generator, pflow_guidance, own,
+                                  mirror=mirror)  # fmt: skip
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide)
