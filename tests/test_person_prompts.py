@@ -208,8 +208,9 @@ def test_conjoined_guidance_pulls_each_prompt_from_nothing():
 def test_a_conjoined_own_prompt_goes_through_the_scene_head_alone():
     """``person_composition`` "and": the own prompt enters as a prompt alone (its token from
     the scene's text head, no person projection), so with ``person_guidance`` 0 the sample
-    is the scene prompt's alone, and a row without an own prompt is guided by the scene
-    twice over, never by another row's prompt."""
+    is the scene prompt's alone; a row without an own prompt is the scene prompt's alone too
+    (its own term is the empty prompt's, zero); an unguided stage reads both prompts
+    together, as the joint form does."""
     model = pflow(True, person_composition="and")
     randomise_projection(model)  # the projection is not used by the conjoined form
     text, empty, own = make_text(2, seed=1), make_text(1, length=2, seed=2), make_text(2, seed=5)
@@ -231,7 +232,23 @@ def test_a_conjoined_own_prompt_goes_through_the_scene_head_alone():
     present = torch.tensor([True, False])
     mixed, _ = model.sample(text, empty, generator=g(), person_text=own, person_present=present)
     assert torch.allclose(mixed[0], conj[0], atol=1e-5)
-    assert torch.allclose(mixed[1], plain[1], atol=1e-4)  # the scene's, at 3 + 3
+    assert torch.allclose(mixed[1], base[1], atol=1e-5)  # the scene's alone, at 3
+    # a stage left unguided (the finest, here) reads scene + own together, not the own alone
+    model.cfg.person_composition, model.cfg.fine_guidance = "and", 1.0
+    seen, forward = [], model.net.forward
+
+    def spy(x, t, **kw):
+        if x.shape[0] == 2:  # a plain call; guided ones run three batches at once
+            seen.append(kw["text"])
+        return forward(x, t, **kw)
+
+    model.net.forward = spy
+    model.sample(text, empty, generator=g(), person_text=own)
+    del model.net.forward
+    with torch.no_grad():
+        model.eval()  # as sampling runs
+        joint = model.net.encode_text(text) + model.net.person_token(own, 2)
+    assert seen and all(torch.allclose(tok, joint) for tok in seen)
 
 
 def test_person_guidance_strengthens_only_the_own_prompt():

@@ -395,3 +395,30 @@ def test_a_prompt_naming_a_side_retrieves_reactions_on_that_side():
     assert torch.equal(sided, latents[kept][d.argmin(dim=1)])
     assert torch.equal(bank.nearest(query, 30, 1, prompt=embed(encoder, [plain]), shortlist=3,
                                     mirror=embed(encoder, [plain]))[0], latents[[1]])  # fmt: skip
+
+
+def test_a_rows_pick_does_not_depend_on_the_others_in_its_batch():
+    """Row 0 draws the same reaction whether its batch partner's shortlist is full or holds
+    fewer reactions than the neighbours asked (a side with few captions), per-row seeds."""
+    g = torch.Generator().manual_seed(7)
+    latents = torch.randn(40, P, R, generator=g)
+    raw = torch.randn(40, 16, generator=g)
+    raw[:, 0] = raw[:, 0].abs() + 0.1
+    raw[:2, 0] = -raw[:2, 0]  # captions 0 and 1 lean the other way along axis 0
+    texts = torch.nn.functional.normalize(raw, dim=-1)
+    bank = ReactionBank({30: latents}, {30: texts})
+    query = latents[[0, 1]] + 0.01
+    prompt = torch.nn.functional.normalize(torch.randn(2, 16, generator=g), dim=-1)
+    far = prompt[1:] + 10.0 * torch.eye(16)[:1]  # a mirror image nearer for all but 0 and 1
+    near_side = (prompt[1] @ texts.T >= far[0] @ texts.T).nonzero()[:, 0].tolist()
+    assert near_side == [0, 1]  # the partner keeps 2 captions on its side, 4 neighbours asked
+    picks = []
+    for partner_mirror in (prompt[1:], far):
+        mirror = torch.cat([prompt[:1], partner_mirror])
+        for seed in range(6):
+            gens = [torch.Generator().manual_seed(seed), torch.Generator().manual_seed(99)]
+            z, _ = bank.nearest(query, 30, 4, gens, prompt=prompt, shortlist=40, mirror=mirror)
+            picks.append((partner_mirror is far, seed, z[0]))
+    for seed in range(6):
+        a, b = (z for far_, s, z in picks if s == seed)
+        assert torch.equal(a, b), seed

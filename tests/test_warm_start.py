@@ -165,6 +165,7 @@ def test_warm_start_out_of_range_is_refused(value):
 @pytest.mark.parametrize(("option", "match"), [
     ("sflow.own_warm=1.0", "own_warm"), ("sflow.own_warm=-0.5", "own_warm"),
     ("pflow.person_composition=or", "person_composition"),
+    ("sflow.warm_side=true", "warm_side needs"),  # the tiny config has no shortlist
 ])  # fmt: skip
 def test_own_prompt_options_out_of_range_are_refused(option, match):
     from conftest import tiny_config
@@ -283,6 +284,8 @@ def test_mirror_text_encodes_the_prompts_with_their_sides_swapped(models, monkey
     words = ["two people walk side by side, the second on the left", "two people bow"]
     assert mirror_text(pipe, words) is None  # off
     monkeypatch.setattr(pipe.config.sflow, "warm_side", True)
+    monkeypatch.setattr(models["cold"].config.sflow, "warm_side", True)
+    assert mirror_text(models["cold"], words) is None  # no warm start: nothing to narrow
     assert mirror_text(pipe, ["two people bow"]) is None  # no side named
     got = mirror_text(pipe, words)
     want = pipe.text_encoder.encode([mirror_caption(w) for w in words])

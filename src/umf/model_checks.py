@@ -128,6 +128,10 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if config.sflow.warm_neighbours < 1:
             raise UMFError(f"sflow.warm_neighbours must be at least 1, got "
                            f"{config.sflow.warm_neighbours}")  # fmt: skip
+        sflow = config.sflow
+        if sflow.warm_side and not (sflow.warm_proposal == "retrieved" and sflow.warm_shortlist):
+            raise UMFError("sflow.warm_side needs sflow.warm_proposal 'retrieved' and "
+                           "sflow.warm_shortlist > 0 (it narrows that shortlist)")  # fmt: skip
         for name in ("warm_start", "own_warm"):
             if getattr(config.sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(config.sflow, name)}")

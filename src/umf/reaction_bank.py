@@ -190,9 +190,8 @@ class ReactionBank:
         allowed = self._shortlisted(length, prompt, shortlist, d, mirror)
         if allowed is not None:
             d = d.masked_fill(~allowed, float("inf"))
-        k = max(1, min(int(neighbours), bank.shape[0] if allowed is None else shortlist))
-        if allowed is not None:  # never more than every row's shortlist holds
-            k = max(1, min(k, int(allowed.sum(dim=1).min())))
+        k = max(1, min(int(neighbours), bank.shape[0] if allowed is None else shortlist,
+                       bank.shape[0]))  # fmt: skip
         at_pace = torch.ones(query.shape[0], dtype=torch.bool, device=query.device)
         if velocity is not None and pace > 0 and length in self.velocities:
             velocity = velocity.to(d)
@@ -202,6 +201,9 @@ class ReactionBank:
             at_pace = near.any(dim=1)
             near.scatter_(1, gap.topk(k, dim=1, largest=False).indices, True)
             d = d.masked_fill(~near, float("inf"))
-        idx = d.topk(k, dim=1, largest=False).indices  # (B, k), nearest first
-        pick = randn((query.shape[0], k), generator, device=query.device).argmax(dim=1)
+        dist, idx = d.topk(k, dim=1, largest=False)  # (B, k), nearest first
+        # the same k draws for every row; a row whose shortlist holds fewer than k draws
+        # among its own (finite) ones, so no row's pick depends on the others in its batch
+        score = randn((query.shape[0], k), generator, device=query.device)
+        pick = score.masked_fill(~torch.isfinite(dist), -torch.inf).argmax(dim=1)
         return bank[idx[torch.arange(query.shape[0], device=query.device), pick]], at_pace

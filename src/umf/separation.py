@@ -171,7 +171,7 @@ def separate_people(
     return joints + shifts[:, None, None, :], shifts
 
 
-def touching_distances(contact: dict | None) -> dict[str, float]:
+def touching_distances(contact: dict | None) -> dict[str, float | bool]:
     """:func:`separate_people`'s distances: its defaults, or for a prompt
     worded like a touching take, that take's closeness (never closer than
     :data:`TOUCH_FLOOR` between joints: bodies still must not pass

@@ -168,7 +168,7 @@ def mirror_text(pipe: Any, words: list[str]) -> Any:
     each names; None when off or when no prompt names a side. The S-Flow does not learn
     a named side from its captions (results/side-named-20261204); real reactions whose
     captions name it stand there."""
-    if not pipe.config.sflow.warm_side:
+    if not (pipe.config.sflow.warm_side and pipe.config.sflow.warm_start):
         return None
     mirrored = [mirror_caption(w) for w in words]
     return None if mirrored == list(words) else pipe.text_encoder.encode(mirrored).to(pipe.device)

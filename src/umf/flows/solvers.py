@@ -178,8 +178,9 @@ def composed_guidance(
     """Guidance over two prompts, each with its own scale (compositional CFG):
     v_u + scale * (v_scene - v_u) + own_scale * (v_both - v_scene), where ``scene`` is the
     scene prompt alone and ``both`` adds each person's own prompt. One forward over the
-    tripled batch [both; scene; uncond]; with ``own_scale == scale`` it is plain CFG of
-    ``both`` against ``uncond``, so the own prompt's pull is set apart from the scene's.
+    tripled batch [both; scene; uncond]; with ``own_scale == scale`` (and not ``conjoin``)
+    it is plain CFG of ``both`` against ``uncond``, so the own prompt's pull is set apart
+    from the scene's.
 
     ``conjoin``: ``both`` is the own prompt alone, as a prompt in its own right, and the two
     are conjoined (the AND of composable diffusion, Liu et al. 2022):

@@ -91,13 +91,14 @@ def _stage_field(
     uncond: dict[str, Any],
     scene: dict[str, Any] | None = None,
     own_scale: float | None = None,
-    conjoin: bool = False,
+    own_alone: dict[str, Any] | None = None,
 ) -> Callable[..., Tensor]:
     """The velocity field the pyramid sampler integrates, guided per stage by ``scales``
     (coarse -> fine; stage K is the coarsest, stage 1 the finest). ``scene``: the scene
-    prompt alone, when ``cond`` adds an own prompt (``conjoin``: is the own prompt alone):
-    then each guided stage guides the own prompt by ``own_scale`` (None: the stage's scale)
-    apart from the scene's (:func:`umf.flows.composed_guidance`)."""
+    prompt alone, when ``cond`` adds an own prompt: then each guided stage guides the own
+    prompt by ``own_scale`` (None: the stage's scale) apart from the scene's
+    (:func:`umf.flows.composed_guidance`); with ``own_alone`` (the own prompt as a prompt
+    alone) conjoined with it. An unguided stage reads ``cond``, both prompts together."""
 
     def plain(x: Tensor, t: Tensor, **shared: Any) -> Tensor:
         return net(x, t, **shared, **cond)
@@ -105,8 +106,9 @@ def _stage_field(
     def guided(s: float) -> Callable[..., Tensor]:
         if scene is None:
             return classifier_free_guidance(net, s, cond, uncond)
-        return composed_guidance(net, s, s if own_scale is None else own_scale, cond, scene,
-                                 uncond, conjoin)  # fmt: skip
+        both = cond if own_alone is None else own_alone
+        return composed_guidance(net, s, s if own_scale is None else own_scale, both, scene,
+                                 uncond, own_alone is not None)  # fmt: skip
 
     fields: dict[float | None, Callable[..., Tensor]] = {
         s: plain if s is None else guided(s) for s in set(scales)
@@ -121,12 +123,13 @@ def _stage_field(
     return field
 
 
-def _own_alone(own: Tensor, scene: Tensor, present: Tensor | None) -> Tensor:
-    """The own prompt's text token per row, the scene's where a row has no own prompt."""
+def _own_alone(own: Tensor, empty: Tensor, present: Tensor | None) -> Tensor:
+    """The own prompt's text token per row, the empty prompt's where a row has none: its
+    conjoined term v_own - v_u is then zero, and the row is guided by the scene alone."""
     if present is None:
         return own
     keep = present.to(own.device, torch.bool).reshape(-1, *[1] * (own.dim() - 1))
-    return torch.where(keep, own, scene)
+    return torch.where(keep, own, empty.expand_as(own))
 
 
 class PFlow(nn.Module):
@@ -276,11 +279,6 @@ class PFlow(nn.Module):
             if person_text is not None:
                 cond["text"] = scene_token + self.net.person_token(person_text, b, person_present)
             scales = stage_scales(self.cfg, guidance)
-            conjoin = (person_text is not None and self.cfg.person_composition == "and"
-                       and any(s is not None for s in scales))  # fmt: skip
-            if conjoin:  # the own prompt through the scene's text head, as a prompt alone
-                cond["text"] = _own_alone(self.net.encode_text(person_text), scene_token,
-                                          person_present)  # fmt: skip
             if self.net.num_datasets > 0:
                 ds = torch.as_tensor(dataset, dtype=torch.long, device=param.device)
                 ds = ds.expand(b) if ds.dim() == 0 else ds.repeat_interleave(num_samples)
@@ -292,11 +290,14 @@ class PFlow(nn.Module):
                 if uncond_text.tokens.shape[0] not in (1, b):
                     uncond_text = repeat_text(uncond_text, num_samples)
                 uncond = {**cond, "text": encode_uncond(self.net, uncond_text, b)}
-            scene = None  # an own prompt is guided apart from the scene's
+            scene = own_alone = None  # an own prompt is guided apart from the scene's
             if person_text is not None and uncond:
                 scene = {**cond, "text": scene_token}
+                if self.cfg.person_composition == "and":  # through the scene's text head
+                    alone = self.net.encode_text(person_text)
+                    own_alone = {**cond, "text": _own_alone(alone, uncond["text"], person_present)}
             field = _stage_field(self.net, scales, cond, uncond, scene, self.cfg.person_guidance,
-                                 conjoin)  # fmt: skip
+                                 own_alone)  # fmt: skip
             k = self.pyramid.num_stages
             noise = initial_noise(
                 self.pyramid,
