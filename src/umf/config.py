@@ -117,6 +117,10 @@ class DenoiserConfig:
     person_head: bool = False
 
 
+# the P-Flow's dataset token: the single-person corpus, the multi-person one
+SINGLE_PERSON, MULTI_PERSON = 0, 1
+
+
 @dataclass
 class PFlowConfig:
     """Pyramidal flow for the first person (paper Sec. 4.2.1)."""
@@ -162,7 +166,7 @@ class PFlowConfig:
     # loss scale of the single-person corpus (the authors': 0.1 for HumanML3D's size); the
     # small family uses 1: on Bandai the actions and gestures are in the single clips
     single_person_weight: float = 0.1
-    num_datasets: int = 2  # learned dataset token: 0 single-person, 1 multi-person
+    num_datasets: int = 2  # learned dataset token: SINGLE_PERSON, MULTI_PERSON
 
 
 @dataclass

@@ -133,8 +133,8 @@ def check_config_values(config: Any, prefix: str = "") -> None:
             raise UMFError("sflow.warm_side needs sflow.warm_proposal 'retrieved' and "
                            "sflow.warm_shortlist > 0 (it narrows that shortlist)")  # fmt: skip
         for name in ("warm_start", "own_warm"):
-            if getattr(config.sflow, name) >= 1.0:
-                raise UMFError(f"sflow.{name} must be below 1, got {getattr(config.sflow, name)}")
+            if getattr(sflow, name) >= 1.0:
+                raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")
         for stage in ("train_vae", "train_pflow"):  # the loss on decoded feet is the S-Flow's
             if getattr(config, stage).foot_loss:
                 raise UMFError(f"{stage}.foot_loss: only train_sflow has a foot loss")

@@ -23,7 +23,7 @@ import numpy as np
 import torch
 
 from umf.anchoring import anchor_people
-from umf.config import UMFConfig
+from umf.config import MULTI_PERSON, SINGLE_PERSON, UMFConfig
 from umf.errors import UMFError
 from umf.kinematics import Bodies, fit_bodies
 from umf.model_checks import (
@@ -326,7 +326,8 @@ class UMFPipeline:
             latents = [self._encode_actor(assemble_features(actor_t, rot6d), b)]
         else:
             t = self._frames(req.seconds)
-            dataset = torch.full((b,), 1 if num_people > 1 else 0, dtype=torch.long)
+            token = MULTI_PERSON if num_people > 1 else SINGLE_PERSON
+            dataset = torch.full((b,), token, dtype=torch.long)
             z1, n = self.pflow.sample(
                 text,
                 uncond,

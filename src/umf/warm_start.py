@@ -48,6 +48,7 @@ from typing import Any
 
 import torch
 
+from umf.config import MULTI_PERSON, SINGLE_PERSON
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
 from umf.reaction_bank import REACTIONS
@@ -67,7 +68,6 @@ def move_onto(features: Tensor, there: Tensor) -> Tensor:
         for f, g in zip(features, there, strict=True)])  # fmt: skip
 
 
-SINGLE_PERSON = 0  # the P-Flow's dataset token of the single clips (umf.train.datasets)
 # the pelvis's mean floor speed (m/s) under which a person is not travelling, so not gliding
 MOVING = 0.5
 ANKLES = (FOOT_LEFT[0], FOOT_RIGHT[0])
@@ -144,7 +144,7 @@ def pflow_proposal(
     generator: Any,
     guidance: float | None,
     own: dict[str, Any],
-    dataset: int = 1,
+    dataset: int = MULTI_PERSON,
 ) -> tuple[Tensor, int]:
     """The P-Flow's motion for the prompt ``text`` and ``own`` (the person's own prompt,
     composed as ``pflow.person_composition`` says) with the P-Flow's ``dataset`` token,

@@ -16,7 +16,7 @@ from typing import Any
 import torch
 from torch import Tensor, nn
 
-from umf.config import SFlowConfig
+from umf.config import MULTI_PERSON, SFlowConfig
 from umf.flows import (
     Method,
     classifier_free_guidance,
@@ -39,8 +39,6 @@ from umf.models.denoiser import (
 from umf.models.latent_normalizer import LatentNormalizer
 from umf.models.pflow import encode_uncond
 from umf.text import Pooling, TextFeatures
-
-MULTI_PERSON = 1  # dataset index a shared P-Flow backbone is run with
 
 
 class SFlow(nn.Module):

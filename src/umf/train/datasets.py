@@ -31,7 +31,7 @@ import numpy as np
 import torch
 from torch.utils.data import Dataset
 
-from umf.config import metadata_pairs
+from umf.config import MULTI_PERSON, SINGLE_PERSON, metadata_pairs
 from umf.data.clip import MotionClip
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
@@ -53,7 +53,6 @@ Tensor = torch.Tensor
 # Chance that a single-person item carries an own prompt (one of its clip's wordings)
 OWN_SINGLE = 0.5
 PLACEMENT_RADIUS = 3.0  # metres: people of a scene stand within a few metres of each other
-SINGLE_PERSON, MULTI_PERSON = 0, 1  # the dataset token of P-Flow
 
 # Spellings the captions use one way and people write the other: the corpus says "walks
 # backwards", a user types "walks backward", and the flows condition on token states, so

@@ -15,8 +15,8 @@ from torch import Tensor
 from torch.utils.data import DataLoader, Dataset
 from tqdm import tqdm
 
+from umf.config import MULTI_PERSON
 from umf.train.batching import usable_workers
-from umf.train.datasets import MULTI_PERSON
 
 
 @torch.no_grad()
