@@ -350,6 +350,11 @@ class TrainConfig:
     # foot_loss_min_t. 0 = off (the paper's loss alone)
     foot_loss: float = 0.0
     foot_loss_min_t: float = 0.5
+    # S-Flow only: weight of the loss on where the decoded reaction stands (m between its
+    # pelvis floor path and the real reaction's; umf.train.placement), on flow times up to
+    # place_loss_max_t, where the state does not yet say where. 0 = off
+    place_loss: float = 0.0
+    place_loss_max_t: float = 0.5
 
 
 @dataclass

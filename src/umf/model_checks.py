@@ -36,15 +36,16 @@ _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every
 
 
 _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
-                 "guidance", "fine_guidance", "person_guidance", "foot_loss",
+                 "guidance", "fine_guidance", "person_guidance", "foot_loss", "place_loss",
                  "warm_glide", "warm_pace"}  # fmt: skip  # >= 0
 
 
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
 
 
+# floats in [0, 1]
 _FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop", "p_scene_drop",
-              "foot_loss_min_t", "warm_start", "own_warm"}  # fmt: skip  # floats in [0, 1]
+              "foot_loss_min_t", "place_loss_max_t", "warm_start", "own_warm"}  # fmt: skip
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -135,9 +136,11 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         for name in ("warm_start", "own_warm"):
             if getattr(sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")
-        for stage in ("train_vae", "train_pflow"):  # the loss on decoded feet is the S-Flow's
-            if getattr(config, stage).foot_loss:
-                raise UMFError(f"{stage}.foot_loss: only train_sflow has a foot loss")
+        for stage in ("train_vae", "train_pflow"):  # the losses on decoded people: S-Flow's
+            for name in ("foot_loss", "place_loss"):
+                if getattr(getattr(config, stage), name):
+                    what = name.replace("_", " ")
+                    raise UMFError(f"{stage}.{name}: only train_sflow has a {what}")
 
 
 def check_weight_shapes(path: Path, modules: dict[str, Any]) -> None:

@@ -22,6 +22,7 @@ from umf.models.vae import MotionVAE, vae_losses
 from umf.representation import POS, Normalizer
 from umf.text import TextFeatureCache, TextFeatures
 from umf.train.foot_slide import FOOT_FRAMES, decoded_foot_slide
+from umf.train.placement import decoded_place_error
 
 
 def _is_scene(batch: dict[str, Any]) -> bool:
@@ -216,8 +217,9 @@ class SFlowStage(_LatentStage):
         self.sflow = sflow or SFlow(config.sflow, p, r, text.encoder.dim, backbone=backbone)
         self.generator = DeviceGenerator(seed)
         self.normalizer = normalizer  # the corpus's: the foot loss decodes to metres
-        if config.train_sflow.foot_loss > 0 and normalizer is None:
-            raise ValueError("train_sflow.foot_loss needs the corpus normaliser")
+        for name in ("foot_loss", "place_loss"):
+            if getattr(config.train_sflow, name) > 0 and normalizer is None:
+                raise ValueError(f"train_sflow.{name} needs the corpus normaliser")
         # the feet are read over the shortest training crop (every latent describes at least
         # that many frames), at most FOOT_FRAMES (the decoder's cost)
         self.foot_frames = max(2, min(FOOT_FRAMES, config.train_sflow.min_frames,
@@ -254,21 +256,36 @@ class SFlowStage(_LatentStage):
         text, uncond = self.encode_text(captions, w.device)
         gen = self.generator.on(w.device)
         person = self.person_text(self.sflow.net, own, w.device)
-        feet = self.config.train_sflow.foot_loss > 0
-        out = self.sflow(prev, prev_mask, w, text, uncond, generator=gen, endpoint=feet, **person)
+        out = self.sflow(prev, prev_mask, w, text, uncond, generator=gen,
+                         endpoint=self._decodes, **person)  # fmt: skip
         return self._with_feet(out, w)
 
+    @property
+    def _decodes(self) -> bool:
+        """Whether a loss on the decoded reaction is on (feet or placement)."""
+        t_cfg = self.config.train_sflow
+        return t_cfg.foot_loss > 0 or t_cfg.place_loss > 0
+
     def _with_feet(self, out: dict[str, Tensor], w: Tensor) -> dict[str, Tensor]:
-        """``total`` plus the weighted foot loss (logged as ``foot``), where it is on."""
+        """``total`` plus the weighted losses on the decoded reaction where they are on: the
+        feet (logged as ``foot``) and the placement (``place``)."""
         if "endpoint" not in out:
             return out
         t_cfg = self.config.train_sflow
         w_hat, t = out.pop("endpoint"), out.pop("t")
         fusion = self.config.vae.fusion_weights(reaction=True)  # as the pipeline decodes them
-        slide = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t, t_cfg.foot_loss_min_t,
-                                   frames=self.foot_frames, fusion=fusion)  # fmt: skip
-        out["total"] = out["total"] + t_cfg.foot_loss * slide
-        out["foot"] = slide.detach()
+        if t_cfg.foot_loss > 0:
+            slide = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t,
+                                       t_cfg.foot_loss_min_t, frames=self.foot_frames,
+                                       fusion=fusion)  # fmt: skip
+            out["total"] = out["total"] + t_cfg.foot_loss * slide
+            out["foot"] = slide.detach()
+        if t_cfg.place_loss > 0:
+            place = decoded_place_error(self.vae, self.normalizer, w, w_hat, t,
+                                        t_cfg.place_loss_max_t, frames=self.foot_frames,
+                                        fusion=fusion)  # fmt: skip
+            out["total"] = out["total"] + t_cfg.place_loss * place
+            out["place"] = place.detach()
         return out
 
     @torch.no_grad()
@@ -277,7 +294,6 @@ class SFlowStage(_LatentStage):
         text, uncond = self.encode_text(captions, w.device)
         gen = DeviceGenerator(1234).on(w.device)
         person = self.person_text(self.sflow.net, own, w.device)
-        feet = self.config.train_sflow.foot_loss > 0
         losses = self.sflow.loss(prev, prev_mask, w, text, uncond, generator=gen,
-                                 endpoint=feet, **person)  # fmt: skip
+                                 endpoint=self._decodes, **person)  # fmt: skip
         return {k: float(v) for k, v in self._with_feet(losses, w).items()}

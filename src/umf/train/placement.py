@@ -1,0 +1,53 @@
+"""A loss on where the decoded reaction stands (``train_sflow.place_loss``): the pelvis's floor
+path of the reaction the S-Flow points at, against the real reaction's, in metres.
+
+Why: the S-Flow's text token cannot tell "the second person on the first one's left" from
+"... right" (centred cosine 0.998, ``research/scene_tokens.py``), so it puts a named side's
+partner in the middle, on person 1 (results/reactions-20261208). From a late flow time the
+state itself says where the reaction stands; only early, where it does not, does the prompt
+have to. There the latent MSE weighs a wrong side little; the decoded floor path weighs it in
+metres.
+"""
+
+from __future__ import annotations
+
+import torch
+from torch import Tensor, nn
+
+from umf.representation import Normalizer, features_to_joints, fuse_positions
+from umf.train.foot_slide import FOOT_ROWS
+
+
+def decoded_place_error(
+    vae: nn.Module,
+    normalizer: Normalizer,
+    w: Tensor,
+    w_hat: Tensor,
+    t: Tensor,
+    max_t: float = 0.5,
+    rows: int = FOOT_ROWS,
+    frames: int = 30,
+    fusion: tuple[float, float, float | None] | None = None,
+) -> Tensor:
+    """Mean floor distance (m) between the pelvis of ``w_hat``'s decoding and ``w``'s, over
+    ``frames`` frames and the rows at flow time ``t <= max_t`` (up to ``rows``).
+
+    ``w`` / ``w_hat`` (B, p, r): the real reactions and the ones the flow points at, in
+    latent units; both decoded alike (``fusion``: :func:`umf.representation.fuse_positions`'s
+    weights, as the pipeline decodes people 2..N). Gradients reach ``w_hat`` only (the
+    decoder is frozen by its caller). Zero when no row qualifies.
+    """
+    keep = torch.nonzero(t <= max_t).squeeze(1)[:rows]
+    if keep.numel() == 0:
+        return w_hat.sum() * 0.0
+    mask = torch.ones(keep.numel(), frames, dtype=torch.bool, device=w.device)
+
+    def pelvis(z: Tensor) -> Tensor:
+        features = normalizer.denormalize(vae.decode(z, mask)).float()
+        if fusion is not None:
+            features = fuse_positions(features, *fusion)
+        return features_to_joints(features)[:, :, 0][..., [0, 2]]
+
+    with torch.no_grad():
+        ref = pelvis(w[keep])
+    return (pelvis(w_hat[keep]) - ref).norm(dim=-1).mean()
