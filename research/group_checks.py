@@ -19,7 +19,8 @@ pair_steps=N`` was chosen on). ``--set`` changes an ``sflow`` config value for t
 ``--context`` tries other contexts for person k >= 3 than everybody before them (``all``,
 the method's): person 1 alone (``leader``), person k - 1 alone (``previous``), or person k - 1
 (``previous-frame``) or everybody (``all-previous-frame``) re-encoded in person k - 1's own
-frame, where person k is generated and from where it is moved back.
+frame, where person k is generated and from where it is moved back (decoded, moved and
+encoded again: person k passes through the VAE once more than in the pipeline).
 """
 
 from __future__ import annotations
@@ -69,13 +70,15 @@ def patch_context(mode: str) -> None:
         if mode in ("leader", "previous"):
             keep = slice(0, 1) if mode == "leader" else slice(n - 1, n)
             return sample_added(pipe, prev[:, keep], mask[:, keep], text, uncond, frames, **kw)
-        decoded = pipe.decode(prev.flatten(0, 1), frames, reaction=True).reshape(b, n, frames, -1)
+        decoded = torch.stack(
+            [pipe.decode(prev[:, j], frames, reaction=j > 0) for j in range(n)], dim=1
+        )  # person 1 fused as person 1
         frame = [leader_frame(decoded[i, -1]) for i in range(b)]
         people = range(n - 1, n) if mode == "previous-frame" else range(n)
         moved = torch.stack([torch.stack([transform_features(decoded[i, j], frame[i])
                                           for j in people]) for i in range(b)])  # fmt: skip
         context = pipe._encode(moved.flatten(0, 1)).reshape(b, len(people), *prev.shape[2:])
-        ones = torch.ones(context.shape[:2], dtype=torch.bool)
+        ones = torch.ones(context.shape[:2], dtype=torch.bool, device=context.device)
         w, nfe = sample_added(pipe, context, ones, text, uncond, frames, **kw)
         there = pipe.decode(w, frames, reaction=True)
         back = [transform_features(there[i], frame[i], inverse=True) for i in range(b)]
@@ -122,7 +125,7 @@ def main() -> None:
         action="append",
         default=[],
         metavar="KEY=VALUE",
-        help="an sflow config value for this run (e.g. group_placement=true)",
+        help="an sflow config value for this run (e.g. pair_steps=10)",
     )
     ap.add_argument("--seed", type=int, default=0, help="the evaluation plan's seed")
     ap.add_argument(
@@ -152,6 +155,8 @@ def main() -> None:
     (c,) = load_contenders(model, [], "cpu", plan, progress=False)
     for item in args.set:
         key, value = item.split("=", 1)
+        if not hasattr(c.pipe.config.sflow, key):
+            raise SystemExit(f"error: --set {item}: sflow has no option {key!r}")
         setattr(c.pipe.config.sflow, key, json.loads(value))
     both = generate_records(c, records, plan.seed + 200_000, _joints_contacts)
     raw = [j for j, _ in both]

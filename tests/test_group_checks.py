@@ -20,10 +20,12 @@ def standing(x: float, z: float, frames: int = 5) -> np.ndarray:
 
 def test_closest_to_earlier_finds_the_person_standing_on_another():
     gc = load_script("group_checks")
-    scene = np.stack([standing(0, 0), standing(2, 0), standing(2.05, 0), standing(5, 0)])
+    scene = np.stack([standing(0, 0), standing(2, 0), standing(2.05, 0), standing(5, 0),
+                      standing(0.05, 0)])  # fmt: skip
     gaps = gc.closest_to_earlier(scene)
-    assert len(gaps) == 2  # persons 3 and 4 (1-based), against everybody before them
+    assert len(gaps) == 3  # persons 3, 4, 5 (1-based), against everybody before them
     assert gaps[0] < 0.25 and gaps[1] > 2.5
+    assert gaps[2] < 0.25  # person 5 stands on person 1, not on person 4 (k - 1)
 
 
 def test_score_counts_scenes_kinds_and_relations():
