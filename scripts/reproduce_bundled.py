@@ -20,7 +20,7 @@ first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
 after it take about 3.6 h here (1.8 h of them the S-Flow; ``settle`` 20 min, ``pace``
 18 min, for the per-person prompts ``person`` 41 min and ``person2`` 23 min, and ``place``
-5 min). ``pace``
+12 min). ``pace``
 was trained on a corpus of the composer of its day (partners of side-by-side scenes at the
 leader's pace and in step; but for its fallback, changed since, 24 of 3,000 training
 scenes), ``person`` and ``person2`` on the current one (with ``stand_facing`` and the own
@@ -144,10 +144,10 @@ PERSON2 = [*sets("train_pflow", max_steps=800, lr=0.0002, real_repeats=60,
 
 # results/umf-small-bandai-20261208: the S-Flow alone, with a loss on where its decoded
 # reaction stands (train_sflow.place_loss) and the relations it failed most served 4 times
-PLACE = sets("train_sflow", max_steps=600, lr=0.0002, warmup_steps=20, real_repeats=60,
+PLACE = sets("train_sflow", max_steps=1500, lr=0.0002, warmup_steps=20, real_repeats=60,
              relation_repeats=["walk_side_by_side=4", "run_side_by_side=4", "bow_back=4",
                                "spar=4"],
-             val_every=300, ckpt_every=100, place_loss=PLACE_WEIGHT)  # fmt: skip
+             val_every=500, ckpt_every=100, place_loss=PLACE_WEIGHT)  # fmt: skip
 
 
 # the last stage's sampling options (results/umf-small-bandai-20261204b, 20261206, 20261207)
