@@ -20,6 +20,23 @@ FOOT_ROWS = 32  # rows of a batch decoded for the loss: the decoder's cost stays
 FOOT_FRAMES = 150  # frames each is decoded to at most (5 s at 30 fps)
 
 
+def decoded_joints(
+    vae: nn.Module,
+    normalizer: Normalizer,
+    z: Tensor,
+    frames: int,
+    fusion: tuple[float, float, float | None] | None = None,
+) -> Tensor:
+    """Joints (B, frames, 22, 3) in metres of latents ``z`` (B, p, r) through the decoder, fused
+    with ``fusion`` (:func:`umf.representation.fuse_positions`'s weights) where given: how the
+    losses on decoded reactions read a latent."""
+    mask = torch.ones(z.shape[0], frames, dtype=torch.bool, device=z.device)
+    features = normalizer.denormalize(vae.decode(z, mask)).float()
+    if fusion is not None:
+        features = fuse_positions(features, *fusion)
+    return features_to_joints(features)
+
+
 def decoded_foot_slide(
     vae: nn.Module,
     normalizer: Normalizer,
@@ -48,14 +65,8 @@ def decoded_foot_slide(
     if keep.numel() == 0:
         return w_hat.sum() * 0.0
     mask = torch.ones(keep.numel(), frames, dtype=torch.bool, device=w.device)
-
-    def joints(z: Tensor) -> Tensor:
-        features = normalizer.denormalize(vae.decode(z, mask)).float()
-        if fusion is not None:
-            features = fuse_positions(features, *fusion)
-        return features_to_joints(features)
-
     with torch.no_grad():
-        ref = joints(w[keep])
+        ref = decoded_joints(vae, normalizer, w[keep], frames, fusion)
         planted = F.pad(foot_contacts(ref), (0, 0, 0, 1))  # (B, T, 4): a pair per frame
-    return foot_contact_loss(joints(w_hat[keep]), ref, planted, mask)
+    moved = decoded_joints(vae, normalizer, w_hat[keep], frames, fusion)
+    return foot_contact_loss(moved, ref, planted, mask)

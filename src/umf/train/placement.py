@@ -14,8 +14,8 @@ from __future__ import annotations
 import torch
 from torch import Tensor, nn
 
-from umf.representation import Normalizer, features_to_joints, fuse_positions
-from umf.train.foot_slide import FOOT_ROWS
+from umf.representation import Normalizer
+from umf.train.foot_slide import FOOT_ROWS, decoded_joints
 
 
 def decoded_place_error(
@@ -40,13 +40,9 @@ def decoded_place_error(
     keep = torch.nonzero(t <= max_t).squeeze(1)[:rows]
     if keep.numel() == 0:
         return w_hat.sum() * 0.0
-    mask = torch.ones(keep.numel(), frames, dtype=torch.bool, device=w.device)
 
     def pelvis(z: Tensor) -> Tensor:
-        features = normalizer.denormalize(vae.decode(z, mask)).float()
-        if fusion is not None:
-            features = fuse_positions(features, *fusion)
-        return features_to_joints(features)[:, :, 0][..., [0, 2]]
+        return decoded_joints(vae, normalizer, z, frames, fusion)[:, :, 0][..., [0, 2]]
 
     with torch.no_grad():
         ref = pelvis(w[keep])

@@ -274,18 +274,16 @@ class SFlowStage(_LatentStage):
         t_cfg = self.config.train_sflow
         w_hat, t = out.pop("endpoint"), out.pop("t")
         fusion = self.config.vae.fusion_weights(reaction=True)  # as the pipeline decodes them
-        if t_cfg.foot_loss > 0:
-            slide = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t,
-                                       t_cfg.foot_loss_min_t, frames=self.foot_frames,
-                                       fusion=fusion)  # fmt: skip
-            out["total"] = out["total"] + t_cfg.foot_loss * slide
-            out["foot"] = slide.detach()
-        if t_cfg.place_loss > 0:
-            place = decoded_place_error(self.vae, self.normalizer, w, w_hat, t,
-                                        t_cfg.place_loss_max_t, frames=self.foot_frames,
-                                        fusion=fusion)  # fmt: skip
-            out["total"] = out["total"] + t_cfg.place_loss * place
-            out["place"] = place.detach()
+        losses = (
+            ("foot", t_cfg.foot_loss, decoded_foot_slide, t_cfg.foot_loss_min_t),
+            ("place", t_cfg.place_loss, decoded_place_error, t_cfg.place_loss_max_t),
+        )
+        for name, weight, loss, when in losses:
+            if weight > 0:
+                value = loss(self.vae, self.normalizer, w, w_hat, t, when,
+                             frames=self.foot_frames, fusion=fusion)  # fmt: skip
+                out["total"] = out["total"] + weight * value
+                out[name] = value.detach()
         return out
 
     @torch.no_grad()
