@@ -800,3 +800,79 @@ def test_relation_repeats_serve_a_relations_scenes_more_often(corpus):
     for bad in (["stand_facing"], ["stand_facing=0"], ["stand_facing=x"]):
         with pytest.raises(UMFError, match="relation_repeats"):
             relation_repeats(bad)
+
+
+# --------------------------------------------------------------------- scenes carried on
+def _striding_actors(corpus, cut: int = 70, cycle: int = 24) -> dict:
+    """Two actors whose clips are ``cut`` frames of an exactly periodic walk (joints and
+    rotations tiled alike): clips that end in a steady, straight gait."""
+    from umf.data.scenes import Actor
+
+    walks = [c for s in ("train", "val", "test") for c in corpus.split_clips(s) if "_walk_" in c.id]
+    walk = max(walks, key=lambda c: c.num_frames)
+    j, r = np.asarray(walk.joints[0], dtype=np.float64), np.asarray(walk.rot6d[0])
+    travel = (j[40 + cycle, 0] - j[40, 0]) * np.array([1.0, 0.0, 1.0])
+    reps = cut // cycle + 1
+    joints = np.concatenate([j[40 : 40 + cycle] + k * travel for k in range(reps)])[:cut]
+    rot = np.concatenate([r[40 : 40 + cycle]] * reps)[:cut]
+    return {name: Actor.from_joints(name, joints.astype(np.float32), "walk", "", rot)
+            for name in ("walker-a", "walker-b")}  # fmt: skip
+
+
+def _recipe(gap: tuple[float, float], yaw: float, constraints: list[dict], frames: int = 70):
+    person = {"delay": 0, "start": 0, "mirrored": False}
+    return {"id": "scene-walk", "relation": "walk_side_by_side", "num_people": 2,
+            "num_frames": frames, "captions": ["Two people walk side by side."],
+            "people": [{**person, "clip": "walker-a", "yaw": 0.0, "xz": (0.0, 0.0)},
+                       {**person, "clip": "walker-b", "yaw": yaw, "xz": gap}],
+            "constraints": constraints}  # fmt: skip
+
+
+SIDE_BY_SIDE = [{"type": "distance", "a": 0, "b": 1, "min": 0.6, "max": 1.6},
+                {"type": "same_heading", "a": 0, "b": 1}]  # fmt: skip
+
+
+def test_scene_gait_periods_carry_on_striders_only_while_their_relation_holds(corpus):
+    from umf.data.relations import check
+    from umf.data.scenes import build_scene
+
+    actors = _striding_actors(corpus)
+    side = _recipe((1.0, 0.0), 0.0, SIDE_BY_SIDE)
+    assert E.scene_gait_periods(build_scene(side, actors), side, 200) == [24, 24]
+    assert E.scene_gait_periods(build_scene(side, actors), side, 60) is None  # long enough
+    # one of them stands still: nothing to carry on
+    stands = np.repeat(actors["walker-b"].joints[:1], 70, axis=0)
+    still = {**actors, "walker-b": dataclasses.replace(actors["walker-b"], joints=stands)}
+    assert E.scene_gait_periods(build_scene(side, still), side, 200) is None
+    # walking towards each other: met after 120 frames, so carried on they would collide
+    pelvis = actors["walker-a"].joints[:, 0, [0, 2]]
+    speed = float(np.linalg.norm(pelvis[-1] - pelvis[0])) / 69  # m/frame
+    no_contact = [{"type": "no_contact", "min_distance": 0.25}]
+    toward = _recipe((0.0, 2 * speed * 120), math.pi, no_contact)
+    joints = build_scene(toward, actors)
+    assert check(joints, toward["constraints"][0]).passed  # the 70 frames composed
+    assert E.scene_gait_periods(joints, toward, 200) is None
+
+
+def test_repeat_scene_gait_serves_short_striding_scenes_whole_carried_on(corpus, monkeypatch):
+    actors = _striding_actors(corpus)
+    side = _recipe((1.0, 0.0), 0.0, SIDE_BY_SIDE)
+    monkeypatch.setattr(corpus, "scenes", {"train": [side]})
+    monkeypatch.setattr(corpus, "actors", lambda: actors)
+    plain = D.SceneDataset(corpus, "train", None, 100, 130, mirror=False, real_clips=False)
+    assert not plain.extended and plain[0]["length"] == 69  # the whole scene, no more
+    ds = D.SceneDataset(corpus, "train", None, 100, 130, mirror=False, real_clips=False,
+                        repeat_gait=True)  # fmt: skip
+    assert ds.extended == {"scene-walk": [24, 24]}
+    for epoch in range(3):
+        ds.set_epoch(epoch)
+        it = ds[0]
+        assert it["start"] == 0 and 100 <= it["length"] <= 130
+        f = it["features"]
+        own = D.canonicalize_features(torch.from_numpy(corpus.scene_features(side)))
+        torch.testing.assert_close(f[:, :68], own[:, :68], atol=1e-5, rtol=0)  # as composed
+        joints = features_to_joints(f.double()).numpy()
+        pose = joints - joints[:, :, :1]  # one cycle on, every pose comes round again
+        np.testing.assert_allclose(pose[:, 69 + 24], pose[:, 69], atol=1e-4)
+        gap = joints[1, :, 0, [0, 2]] - joints[0, :, 0, [0, 2]]  # still side by side
+        np.testing.assert_allclose(gap[:, -1], gap[:, 0], atol=1e-3)

@@ -324,6 +324,10 @@ class TrainConfig:
     # and those that end in a steady, straight gait repeat their last cycle up to a full crop
     # (umf.train.extension.gait_period): a 4 s run keeps running instead of slowing to a glide
     repeat_gait: bool = False
+    # scene batches: and composed scenes shorter than min_frames whose people all end in a
+    # steady gait, where their relation still holds (umf.train.extension.scene_gait_periods):
+    # a 4 s run side by side at a sprint, which Bandai's short runs never composed
+    repeat_scene_gait: bool = False
     # and those that end neither, but slowly (every end speed under 1 m/s: a getup cut while
     # the pelvis still rises), are eased to a stop over their last frames, then held
     # (umf.train.extension.settle_times): a 4 s "get up" ends standing instead of bending again
@@ -355,6 +359,10 @@ class TrainConfig:
     # place_loss_max_t, where the state does not yet say where. 0 = off
     place_loss: float = 0.0
     place_loss_max_t: float = 0.5
+    # S-Flow only: weight of the loss on where every joint of the decoded reaction is (mean 3-D
+    # distance in m from the real reaction's, in person 1's frame; umf.train.placement), on
+    # the place loss's flow times: hands held, a bow at its time. 0 = off
+    joint_loss: float = 0.0
 
 
 @dataclass

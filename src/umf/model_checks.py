@@ -37,7 +37,7 @@ _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every
 
 _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
                  "guidance", "fine_guidance", "person_guidance", "foot_loss", "place_loss",
-                 "warm_glide", "warm_pace"}  # fmt: skip  # >= 0
+                 "joint_loss", "warm_glide", "warm_pace"}  # fmt: skip  # >= 0
 
 
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
@@ -137,7 +137,7 @@ def check_config_values(config: Any, prefix: str = "") -> None:
             if getattr(sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")
         for stage in ("train_vae", "train_pflow"):  # the losses on decoded people: S-Flow's
-            for name in ("foot_loss", "place_loss"):
+            for name in ("foot_loss", "place_loss", "joint_loss"):
                 if getattr(getattr(config, stage), name):
                     what = name.replace("_", " ")
                     raise UMFError(f"{stage}.{name}: only train_sflow has a {what}")

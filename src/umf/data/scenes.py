@@ -89,18 +89,31 @@ def build_scene(recipe: dict[str, Any], actors: dict[str, Actor]) -> np.ndarray:
 
 def build_scene_features(recipe: dict[str, Any], actors: dict[str, Actor]) -> np.ndarray:
     """Features (P, T - 1, 262) of a scene recipe; needs actors with ``rot6d``."""
-    joints = torch.from_numpy(build_scene(recipe, actors))
+    joints, rot = build_scene(recipe, actors), scene_rotations(recipe, actors)
+    return scene_features_of(joints, rot)
+
+
+def scene_rotations(recipe: dict[str, Any], actors: dict[str, Actor]) -> np.ndarray:
+    """Local 6-D rotations (P, T, 21, 6) of a scene recipe's people, laid out in time as
+    :func:`build_scene` lays out their joints; needs actors with ``rot6d``."""
     out = []
-    for person, j in zip(recipe["people"], joints, strict=True):
+    for person in recipe["people"]:
         rot = actors[person["clip"]].rot6d
         if rot is None:
             raise ValueError(f"actor {person['clip']} has no rotations")
-        rot = torch.from_numpy(rot)
         if person.get("mirrored", False):
-            rot = mirror_rot6d(rot)
-        rot = time_layout(rot.numpy(), person["delay"], person["start"], recipe["num_frames"])
-        out.append(assemble_features(j, torch.from_numpy(rot)))
-    return torch.stack(out).numpy()
+            rot = mirror_rot6d(torch.from_numpy(rot)).numpy()
+        out.append(time_layout(rot, person["delay"], person["start"], recipe["num_frames"]))
+    return np.stack(out)
+
+
+def scene_features_of(joints: np.ndarray, rot6d: np.ndarray) -> np.ndarray:
+    """Features (P, T - 1, 262) of people's joints (P, T, 22, 3) and rotations (P, T, 21, 6)."""
+    return torch.stack([
+        assemble_features(torch.from_numpy(np.ascontiguousarray(j)),
+                          torch.from_numpy(np.ascontiguousarray(r)))
+        for j, r in zip(joints, rot6d, strict=True)
+    ]).numpy()  # fmt: skip
 
 
 def mirror_joints_np(joints: np.ndarray) -> np.ndarray:

@@ -34,6 +34,7 @@ from torch.utils.data import Dataset
 from umf.config import MULTI_PERSON, SINGLE_PERSON, metadata_pairs
 from umf.data.clip import MotionClip
 from umf.data.corpus import Corpus
+from umf.data.scenes import build_scene, scene_features_of, scene_rotations
 from umf.errors import UMFError
 from umf.representation import (
     Normalizer,
@@ -46,7 +47,13 @@ from umf.representation import (
 )
 from umf.text import mirror_caption, swap_words, word_pattern
 from umf.train.batching import collate_scenes, collate_single
-from umf.train.extension import SETTLE, extend_person, extension_period
+from umf.train.extension import (
+    SETTLE,
+    extend_person,
+    extend_scene,
+    extension_period,
+    scene_gait_periods,
+)
 
 Tensor = torch.Tensor
 
@@ -408,6 +415,10 @@ class SceneDataset(_EpochDataset):
     time). ``relation_repeats``: composed scenes of those relations that many times each.
     Scenes with more than ``max_people`` people are left out rather than truncated: their
     captions count everybody. ``respell``: as in :class:`SingleMotionDataset`.
+    ``repeat_gait``: a composed scene shorter than ``min_frames`` whose people all end in a
+    steady gait, and whose relation still holds when they go on, is served from its start at
+    a crop length from ``min_frames`` to ``max_frames``, each person's last cycle repeated
+    (:func:`umf.train.extension.scene_gait_periods`); ``extended`` maps its id to the periods.
     """
 
     def __init__(
@@ -424,6 +435,7 @@ class SceneDataset(_EpochDataset):
         respell: bool = False,
         real_repeats: int = 1,
         relation_repeats: Mapping[str, int] | None = None,
+        repeat_gait: bool = False,
     ) -> None:
         super().__init__(seed)
         if real_repeats < 1:
@@ -449,6 +461,14 @@ class SceneDataset(_EpochDataset):
             raise UMFError(f"{corpus.root}: no multi-person scenes in split {split!r}")
         corpus.actors()  # built once here, so worker processes inherit it
         self.clip_captions = {c.id: c.captions for c in corpus.clips}
+        self.extended: dict[str, list[int]] = {}
+        if repeat_gait:
+            for kind, r, _ in self.items:
+                if kind == "scene" and r["num_frames"] - 1 < min_frames and r["id"] not in \
+                        self.extended:  # fmt: skip
+                    periods = scene_gait_periods(corpus.scene_joints(r), r, max_frames + 1)
+                    if periods is not None:
+                        self.extended[r["id"]] = periods
 
     def _own_captions(self, kind: str, item: Any, index: int) -> list[str]:
         """Each person's own caption: a wording of the clip a composed person plays
@@ -470,6 +490,12 @@ class SceneDataset(_EpochDataset):
     def _crop(self, kind: str, item: Any, tf, start: int, length: int) -> Tensor:
         if kind == "clip":
             return _clip_crop(item, tf, range(item.num_people), start, length)
+        periods = self.extended.get(item["id"])
+        if periods is not None:  # the whole scene, each person's last cycle repeated
+            actors = self.corpus.actors()
+            joints, rot = extend_scene(build_scene(item, actors), scene_rotations(item, actors),
+                                       periods, start, start + length + 1)  # fmt: skip
+            return torch.from_numpy(scene_features_of(joints, rot))
         recipe = crop_recipe(item, self.corpus.actors(), start, length + 1)
         return torch.from_numpy(self.corpus.scene_features(recipe))
 
@@ -477,7 +503,10 @@ class SceneDataset(_EpochDataset):
         kind, item, tf = self.items[index]
         rng = self._rng(index)
         total = (item.num_frames if kind == "clip" else item["num_frames"]) - 1
-        start, length = crop_window(rng, total, self.min_frames, self.max_frames)
+        if kind == "scene" and item["id"] in self.extended:
+            start, length = 0, int(rng.integers(self.min_frames, self.max_frames + 1))
+        else:
+            start, length = crop_window(rng, total, self.min_frames, self.max_frames)
         captions = item.captions if kind == "clip" else item["captions"]
         caption = captions[int(rng.integers(len(captions)))] if captions else ""
         f = canonicalize_features(self._crop(kind, item, tf, start, length))

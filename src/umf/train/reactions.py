@@ -57,7 +57,8 @@ def build_reaction_bank(
     velocities: dict[int, torch.Tensor] = {}
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
-                          max_frames=frames, mirror=True, seed=seed)  # fmt: skip
+                          max_frames=frames, mirror=True, seed=seed,
+                          repeat_gait=pipe.config.train_sflow.repeat_scene_gait)  # fmt: skip
         people, captions = [], []
         for i in range(len(ds)):
             item = ds[i]

@@ -136,6 +136,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                 normalizer,
                 real_repeats=t.real_repeats if train else 1,
                 relation_repeats=relation_repeats(t.relation_repeats) if train else None,
+                repeat_gait=t.repeat_scene_gait,  # defines the target: validation too
                 **common,
             )
         bank = None

@@ -22,7 +22,7 @@ from umf.models.vae import MotionVAE, vae_losses
 from umf.representation import POS, Normalizer
 from umf.text import TextFeatureCache, TextFeatures
 from umf.train.foot_slide import FOOT_FRAMES, decoded_foot_slide
-from umf.train.placement import decoded_place_error
+from umf.train.placement import decoded_place_errors
 
 
 def _is_scene(batch: dict[str, Any]) -> bool:
@@ -217,7 +217,7 @@ class SFlowStage(_LatentStage):
         self.sflow = sflow or SFlow(config.sflow, p, r, text.encoder.dim, backbone=backbone)
         self.generator = DeviceGenerator(seed)
         self.normalizer = normalizer  # the corpus's: the foot loss decodes to metres
-        for name in ("foot_loss", "place_loss"):
+        for name in ("foot_loss", "place_loss", "joint_loss"):
             if getattr(config.train_sflow, name) > 0 and normalizer is None:
                 raise ValueError(f"train_sflow.{name} needs the corpus normaliser")
         # the feet are read over the shortest training crop (every latent describes at least
@@ -262,28 +262,30 @@ class SFlowStage(_LatentStage):
 
     @property
     def _decodes(self) -> bool:
-        """Whether a loss on the decoded reaction is on (feet or placement)."""
+        """Whether a loss on the decoded reaction is on (feet, placement or joints)."""
         t_cfg = self.config.train_sflow
-        return t_cfg.foot_loss > 0 or t_cfg.place_loss > 0
+        return t_cfg.foot_loss > 0 or t_cfg.place_loss > 0 or t_cfg.joint_loss > 0
 
     def _with_feet(self, out: dict[str, Tensor], w: Tensor) -> dict[str, Tensor]:
         """``total`` plus the weighted losses on the decoded reaction where they are on: the
-        feet (logged as ``foot``) and the placement (``place``)."""
+        feet (logged as ``foot``), the placement (``place``) and the joints (``joint``)."""
         if "endpoint" not in out:
             return out
         t_cfg = self.config.train_sflow
         w_hat, t = out.pop("endpoint"), out.pop("t")
         fusion = self.config.vae.fusion_weights(reaction=True)  # as the pipeline decodes them
-        losses = (
-            ("foot", t_cfg.foot_loss, decoded_foot_slide, t_cfg.foot_loss_min_t),
-            ("place", t_cfg.place_loss, decoded_place_error, t_cfg.place_loss_max_t),
-        )
-        for name, weight, loss, when in losses:
-            if weight > 0:
-                value = loss(self.vae, self.normalizer, w, w_hat, t, when,
-                             frames=self.foot_frames, fusion=fusion)  # fmt: skip
-                out["total"] = out["total"] + weight * value
-                out[name] = value.detach()
+        kw = {"frames": self.foot_frames, "fusion": fusion}
+        losses: dict[str, Tensor] = {}
+        if t_cfg.foot_loss > 0:
+            losses["foot"] = decoded_foot_slide(self.vae, self.normalizer, w, w_hat, t,
+                                                t_cfg.foot_loss_min_t, **kw)  # fmt: skip
+        if t_cfg.place_loss > 0 or t_cfg.joint_loss > 0:  # one decoding for both
+            early = decoded_place_errors(self.vae, self.normalizer, w, w_hat, t,
+                                         t_cfg.place_loss_max_t, **kw)  # fmt: skip
+            losses.update({k: v for k, v in early.items() if getattr(t_cfg, f"{k}_loss") > 0})
+        for name, value in losses.items():
+            out["total"] = out["total"] + getattr(t_cfg, f"{name}_loss") * value
+            out[name] = value.detach()
         return out
 
     @torch.no_grad()
