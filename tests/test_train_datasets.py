@@ -847,11 +847,17 @@ def test_scene_gait_periods_carry_on_striders_only_while_their_relation_holds(co
     # walking towards each other: met after 120 frames, so carried on they would collide
     pelvis = actors["walker-a"].joints[:, 0, [0, 2]]
     speed = float(np.linalg.norm(pelvis[-1] - pelvis[0])) / 69  # m/frame
-    no_contact = [{"type": "no_contact", "min_distance": 0.25}]
+    no_contact = [{"type": "no_contact", "min_distance": 0.25},
+                  {"type": "same_heading", "a": 0, "b": 0}]  # fmt: skip
     toward = _recipe((0.0, 2 * speed * 120), math.pi, no_contact)
     joints = build_scene(toward, actors)
     assert check(joints, toward["constraints"][0]).passed  # the 70 frames composed
     assert E.scene_gait_periods(joints, toward, 200) is None
+    # people who do not travel together are not carried on, even where nothing would fail
+    apart = _recipe((0.0, 50.0), math.pi, no_contact[:1])
+    assert E.scene_gait_periods(build_scene(apart, actors), apart, 200) is None
+    apart["constraints"] = no_contact
+    assert E.scene_gait_periods(build_scene(apart, actors), apart, 200) == [24, 24]
 
 
 def test_repeat_scene_gait_serves_short_striding_scenes_whole_carried_on(corpus, monkeypatch):

@@ -324,9 +324,10 @@ class TrainConfig:
     # and those that end in a steady, straight gait repeat their last cycle up to a full crop
     # (umf.train.extension.gait_period): a 4 s run keeps running instead of slowing to a glide
     repeat_gait: bool = False
-    # scene batches: and composed scenes shorter than min_frames whose people all end in a
-    # steady gait, where their relation still holds (umf.train.extension.scene_gait_periods):
-    # a 4 s run side by side at a sprint, which Bandai's short runs never composed
+    # scene batches: and composed scenes shorter than min_frames whose people travel together
+    # and all end in a steady gait, where their relation still holds
+    # (umf.train.extension.scene_gait_periods): a 4 s run side by side at a sprint, which
+    # Bandai's short runs never composed
     repeat_scene_gait: bool = False
     # and those that end neither, but slowly (every end speed under 1 m/s: a getup cut while
     # the pelvis still rises), are eased to a stop over their last frames, then held

@@ -415,8 +415,9 @@ class SceneDataset(_EpochDataset):
     time). ``relation_repeats``: composed scenes of those relations that many times each.
     Scenes with more than ``max_people`` people are left out rather than truncated: their
     captions count everybody. ``respell``: as in :class:`SingleMotionDataset`.
-    ``repeat_gait``: a composed scene shorter than ``min_frames`` whose people all end in a
-    steady gait, and whose relation still holds when they go on, is served from its start at
+    ``repeat_gait``: a composed scene shorter than ``min_frames`` whose people travel
+    together and all end in a steady gait, and whose relation still holds when they go on,
+    is served from its start at
     a crop length from ``min_frames`` to ``max_frames``, each person's last cycle repeated
     (:func:`umf.train.extension.scene_gait_periods`); ``extended`` maps its id to the periods.
     """
