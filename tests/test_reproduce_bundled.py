@@ -46,6 +46,7 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "person",
         "person2",
         "place",
+        "gait",
         "name",
     ]
     cfg = family_config("small")
@@ -124,7 +125,10 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert place[place.index("--from") + 1] == str(tmp_path / "runs" / "person2" / "model")
     assert place[place.index("--stages") + 1] == "sflow"
     assert f"train_sflow.place_loss={rb.PLACE_WEIGHT}" in _sets(place)
-    final = tmp_path / "runs" / "place" / "model"
+    gait = stages["gait"][0]
+    assert gait[gait.index("--from") + 1] == str(tmp_path / "runs" / "place" / "model")
+    assert _sets(gait) == [*_sets(place), "train_sflow.repeat_scene_gait=true"]
+    final = tmp_path / "runs" / "gait" / "model"
     assert stages["name"][0][2:4] == [str(final), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
@@ -168,7 +172,7 @@ def test_stages_the_final_config_overwrites_keep_their_documented_options(tmp_pa
     cut = {st.name: st.commands for st in _script().stages(tmp_path, Path("out/corpus"), 3)}
     trained = {"gpu": ("vae", "pflow", "sflow"), "hg": ("pflow",), "dec": ("vae",),
                "mix": ("pflow",), "person": ("pflow", "sflow"), "person2": ("pflow", "sflow"),
-               "place": ("sflow",),
+               "place": ("sflow",), "gait": ("sflow",),
                **{n: ("sflow",) for n in ("rn0.5", "rn0.5b", "rn0.25c", "rn0.125d")}}  # fmt: skip
     for name, what in trained.items():
         last = {o.split("=")[0]: o.split("=")[1] for o in _sets(cut[name][0])}  # last one wins
@@ -186,7 +190,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
                      "mix", "teach", "reteach", "rebalance", "settle", "pace", "steps", "person",
-                     "person2", "place", "name"]  # fmt: skip
+                     "person2", "place", "gait", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",

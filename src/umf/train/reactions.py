@@ -40,7 +40,8 @@ def build_reaction_bank(
     log: Callable[[str], None] = print,
 ) -> ReactionBank:
     """People 2..N of the train split's scenes and real takes, cropped to each length in
-    person 1's frame (mirrored at random, as in training), as the VAE's posterior means, with
+    person 1's frame (mirrored at random, as in training; short striding scenes carried on
+    where the S-Flow's ``train_sflow.repeat_scene_gait`` says), as the VAE's posterior means, with
     their scene's caption embedded by the model's text encoder and their pelvis's mean floor
     velocity; at most ``per_length`` per length, drawn with ``seed``. A length no scene is
     long enough for is left out; a corpus without multi-person train scenes raises
