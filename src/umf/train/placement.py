@@ -57,17 +57,3 @@ def decoded_place_errors(
         "joint": (moved - ref).norm(dim=-1).mean(),
     }
 
-
-def decoded_place_error(
-    vae: nn.Module,
-    normalizer: Normalizer,
-    w: Tensor,
-    w_hat: Tensor,
-    t: Tensor,
-    max_t: float = 0.5,
-    rows: int = FOOT_ROWS,
-    frames: int = 30,
-    fusion: tuple[float, float, float | None] | None = None,
-) -> Tensor:
-    """The pelvis's mean floor distance (m) of :func:`decoded_place_errors`."""
-    return decoded_place_errors(vae, normalizer, w, w_hat, t, max_t, rows, frames, fusion)["place"]
