@@ -56,4 +56,3 @@ def decoded_place_errors(
         "place": (moved[:, :, 0][..., [0, 2]] - ref[:, :, 0][..., [0, 2]]).norm(dim=-1).mean(),
         "joint": (moved - ref).norm(dim=-1).mean(),
     }
-
