@@ -417,8 +417,8 @@ class SceneDataset(_EpochDataset):
     captions count everybody. ``respell``: as in :class:`SingleMotionDataset`.
     ``repeat_gait``: a composed scene shorter than ``min_frames`` whose people travel
     together and all end in a steady gait, and whose relation still holds when they go on,
-    is served from its start at
-    a crop length from ``min_frames`` to ``max_frames``, each person's last cycle repeated
+    is served from its start at a crop length from ``min_frames`` to ``max_frames``, each
+    person's last cycle repeated
     (:func:`umf.train.extension.scene_gait_periods`); ``extended`` maps its id to the periods.
     """
 
@@ -463,13 +463,13 @@ class SceneDataset(_EpochDataset):
         corpus.actors()  # built once here, so worker processes inherit it
         self.clip_captions = {c.id: c.captions for c in corpus.clips}
         self.extended: dict[str, list[int]] = {}
-        if repeat_gait:
-            for kind, r, _ in self.items:
-                if kind == "scene" and r["num_frames"] - 1 < min_frames and r["id"] not in \
-                        self.extended:  # fmt: skip
-                    periods = scene_gait_periods(corpus.scene_joints(r), r, max_frames + 1)
-                    if periods is not None:
-                        self.extended[r["id"]] = periods
+        if repeat_gait:  # each distinct short scene once (relation_repeats serve some again)
+            short = {r["id"]: r for kind, r, _ in self.items
+                     if kind == "scene" and r["num_frames"] - 1 < min_frames}  # fmt: skip
+            for sid, r in short.items():
+                periods = scene_gait_periods(corpus.scene_joints(r), r, max_frames + 1)
+                if periods is not None:
+                    self.extended[sid] = periods
 
     def _own_captions(self, kind: str, item: Any, index: int) -> list[str]:
         """Each person's own caption: a wording of the clip a composed person plays
