@@ -178,7 +178,7 @@ def test_followers_keep_pace_with_a_walking_leader(pipe):
 
 
 def test_running_followers_run_at_about_the_leaders_pace(pipe):
-    """"Two people run side by side.", 4 s, seeds 0-3: the follower's delivered start-to-end
+    """ "Two people run side by side.", 4 s, seeds 0-3: the follower's delivered start-to-end
     floor speed over the leader's, median within 15 % of 1. The S-Flow trained on 4-second
     runs carried on by their gait (``train_sflow.repeat_scene_gait``) gives 0.98; before it,
     the runs long enough for its crops were slow jogs and 20261208 gave 0.71

@@ -129,9 +129,9 @@ def test_the_pipeline_warm_starts_from_a_real_reaction(corpus, model, tmp_path, 
     real = umf.warm_start.proposal
 
     def seen(*args, **kw):
-        z, nfe, fits = real(*args, **kw)
+        z, nfe, fits, lag = real(*args, **kw)
         proposals.append(z)
-        return z, nfe, fits
+        return z, nfe, fits, lag
 
     monkeypatch.setattr(umf.warm_start, "proposal", seen)
     a = pipe("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]
@@ -422,3 +422,52 @@ def test_a_rows_pick_does_not_depend_on_the_others_in_its_batch():
     for seed in range(6):
         a, b = (z for far_, s, z in picks if s == seed)
         assert torch.equal(a, b), seed
+
+
+def test_the_bank_stores_how_long_each_reaction_waited_in_its_whole_scene(corpus, model, tmp_path):
+    """``lags``: per reaction, its action onset minus person 1's in the whole scene it was
+    cropped from (as the checks read onsets), whatever the crop cut; kept by the file, a
+    row of the wrong length refused."""
+    from safetensors.torch import load_file, save_file
+
+    from umf.data.corpus import Corpus
+    from umf.train.datasets import SceneDataset
+    from umf.train.reactions import scene_onsets
+
+    pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    bank = build_reaction_bank(corpus, pipe, lengths=[30], per_length=10_000, progress=False,
+                               log=lambda m: None)  # fmt: skip
+    ds = SceneDataset(Corpus.load(corpus), "train", pipe.normalizer, min_frames=30,
+                      max_frames=30, mirror=True, seed=0)  # fmt: skip
+    want = []
+    for i in range(len(ds)):
+        people = ds[i]["features"].shape[0]
+        if ds[i]["features"].shape[1] == 30:
+            onsets = scene_onsets(ds.whole(i))
+            assert len(onsets) == people
+            want += [o - onsets[0] for o in onsets[1:]]
+    assert bank.lags[30].tolist() == want
+    assert any(want)  # the fixture's composed scenes wait
+    path = bank.save(tmp_path)
+    assert torch.equal(ReactionBank.load(tmp_path).lags[30], bank.lags[30])
+    raw = load_file(str(path))
+    raw["lag_30"] = raw["lag_30"][:-1]
+    save_file(raw, str(path))
+    with pytest.raises(UMFError, match="lags of 30 frames do not match"):
+        ReactionBank.load(tmp_path)
+
+
+def test_shortlist_lag_is_the_median_wait_of_the_captions_nearest_the_prompt():
+    latents = torch.randn(5, P, R, generator=torch.Generator().manual_seed(8))
+    texts = torch.nn.functional.normalize(torch.tensor(
+        [[1.0, 0.0], [1.0, 0.1], [1.0, 0.2], [0.0, 1.0], [0.1, 1.0]]), dim=-1)  # fmt: skip
+    lags = torch.tensor([20.0, 30.0, 26.0, 0.0, -2.0])
+    bank = ReactionBank({30: latents}, {30: texts}, lags={30: lags})
+    prompts = torch.nn.functional.normalize(torch.tensor([[1.0, 0.05], [0.05, 1.0]]), dim=-1)
+    assert bank.shortlist_lag(33, prompts, 3).tolist() == [26.0, 0.0]
+    assert bank.shortlist_lag(33, prompts, 2).tolist() == [20.0, -2.0]  # torch: the lower
+    assert bank.shortlist_lag(33, None, 3) is None and bank.shortlist_lag(33, prompts, 0) is None
+    assert ReactionBank({30: latents}, {30: texts}).shortlist_lag(30, prompts, 3) is None
+    length, idx, _ = bank.pick(latents[[2, 4]] + 0.01, 30, 1)
+    assert length == 30 and idx.tolist() == [2, 4]
+    assert bank.lag(30, idx).tolist() == [26.0, -2.0]

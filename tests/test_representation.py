@@ -392,3 +392,23 @@ def test_normalizer_load_rejects_other_files(tmp_path):
             rep.Normalizer.load(path)
     save_file(good, str(tmp_path / "good.safetensors"))
     assert torch.equal(rep.Normalizer.load(tmp_path / "good.safetensors").std, good["std"])
+
+
+def test_shift_in_time_holds_the_first_or_last_pose_still_and_keeps_the_length(real_joints):
+    f = rep.assemble_features(real_joints, rep.joints_to_rot6d(real_joints))  # (T - 1, 262)
+    n = f.shape[0]
+    later = rep.shift_in_time(f, 7)
+    assert later.shape == f.shape
+    torch.testing.assert_close(later[7:], f[:-7])  # the motion, 7 frames on
+    for t in range(7):  # before it: the first pose, standing still
+        torch.testing.assert_close(later[t, rep.POS], f[0, rep.POS])
+        torch.testing.assert_close(later[t, rep.ROT], f[0, rep.ROT])
+        assert float(later[t, rep.VEL].abs().max()) == 0.0
+    earlier = rep.shift_in_time(f, -5)
+    torch.testing.assert_close(earlier[: n - 5], f[5:])
+    torch.testing.assert_close(earlier[n - 5 :, rep.POS], f[-1:, rep.POS].expand(5, -1))
+    torch.testing.assert_close(rep.shift_in_time(f, 0), f)
+    torch.testing.assert_close(rep.shift_in_time(f, 10 * n)[-1, rep.POS], f[0, rep.POS])  # clamped
+    # held frames are still, so the decoded joints do not move there
+    j = rep.features_to_joints(later)
+    assert float((j[1:7] - j[:6]).abs().max()) < 1e-6

@@ -246,3 +246,32 @@ def test_stand_facing_pairs_two_different_actions_the_captions_leave_open(actors
     actions = ("wave", "bow", "raise", "hand", "kick", "punch", "slash", "call")
     for caption in recipe["captions"]:
         assert not any(w in caption.lower() for w in actions), caption
+
+
+def test_starts_after_reads_the_action_not_the_shimmer(bandai_clips):
+    """Decoded motion shimmers a few mm per joint per frame. Read frame to frame, a second of
+    shimmering stillness weighs as much as a bow, so a person who waits 40 frames seems to
+    bow at once; the check averages positions over ``ONSET_SMOOTHING`` frames first and
+    reads the wait."""
+    from umf.data.relations import ONSET_SMOOTHING, action_onset, moving_average
+
+    bow = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001").joints[0]
+    rng = np.random.default_rng(0)
+
+    def waits(frames: int) -> np.ndarray:
+        still, after = np.repeat(bow[:1], frames, 0), np.repeat(bow[-1:], 40 - frames, 0)
+        j = np.concatenate([still, bow, after])
+        return j + rng.normal(0.0, 0.001, j.shape)  # 1 mm per coordinate and frame
+
+    clean = np.concatenate([np.repeat(bow[:1], 40, 0), bow])
+    early, late = waits(0), waits(40)
+    want = action_onset(clean, smooth=ONSET_SMOOTHING)  # the wait, read without shimmer
+    assert abs(want - (action_onset(bow) + 40)) <= 3
+    assert abs(action_onset(late, smooth=ONSET_SMOOTHING) - want) <= 3
+    assert action_onset(late) < want - 15  # frame to frame: the shimmer reads as the bow
+    scene = np.stack([early, late])
+    assert check(scene, {"type": "starts_after", "a": 0, "b": 1, "min_frames": 30}).passed
+    assert not check(scene, {"type": "starts_after", "a": 1, "b": 0, "min_frames": 5}).passed
+    x = np.arange(12.0)[:, None]  # the average over a centred window, the ends repeated
+    np.testing.assert_allclose(moving_average(x, 3)[[0, 5, 11], 0], [1 / 3, 5.0, 32 / 3])
+    assert moving_average(x, 1) is x

@@ -142,8 +142,8 @@ def test_the_proposal_matters(models, monkeypatch):
     real = umf.warm_start.proposal
 
     def shifted(pipe, first, *args, **kw):
-        z, nfe, fits = real(pipe, first, *args, **kw)
-        return z + 1.0, nfe, fits
+        z, nfe, fits, lag = real(pipe, first, *args, **kw)
+        return z + 1.0, nfe, fits, lag
 
     monkeypatch.setattr(umf.warm_start, "proposal", shifted)
     other = _scene(models["warm"], people=2)
@@ -290,3 +290,53 @@ def test_mirror_text_encodes_the_prompts_with_their_sides_swapped(models, monkey
     got = mirror_text(pipe, words)
     want = pipe.text_encoder.encode([mirror_caption(w) for w in words])
     assert torch.equal(got.tokens, want.tokens) and "right" in mirror_caption(words[0])
+
+
+def test_retime_makes_an_answer_wait_as_long_after_the_leader(bandai_clips):
+    """A bow moved so that, as the checks read onsets, it starts ``lag`` frames after the
+    leader's bow: later, on a leader who starts late, and earlier than it did."""
+    from umf.warm_start import onsets, retime
+
+    bow = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001").joints[0][:120]
+    f = rep.joints_to_features(torch.from_numpy(bow).float())
+    leader = torch.stack([f, rep.shift_in_time(f, 20), f])
+    reaction = torch.stack([f, f, rep.shift_in_time(f, 30)])
+    lag = torch.tensor([25.0, 15.0, 10.0])
+    out = retime(reaction, leader, lag)
+    got = [b - a for a, b in zip(onsets(leader), onsets(out), strict=True)]
+    assert all(abs(g - w) <= 1 for g, w in zip(got, lag.tolist(), strict=True)), got
+    assert out.shape == reaction.shape
+
+
+def test_warm_timing_retimes_only_answers(models):
+    """``sflow.warm_timing``: rows whose retrieved reaction waited at least that long are
+    moved in time and re-encoded (and so replace the first pass); the others, a bank
+    without lags, and the option off keep the proposal as it was."""
+    from umf.warm_start import timed_proposal
+
+    pipe = models["warm"]
+    g = torch.Generator().manual_seed(0)
+    guess = torch.randn(3, *pipe.vae.latent_shape, generator=g)
+    prev = torch.randn(3, 1, *pipe.vae.latent_shape, generator=g)
+    lag = torch.tensor([0.0, 20.0, 7.0])
+    same, answer = timed_proposal(pipe, guess, prev, lag, 30)
+    assert torch.equal(same, guess) and not answer.any()  # off (0)
+    old = pipe.config.sflow.warm_timing
+    try:
+        pipe.config.sflow.warm_timing = 8.0
+        out, answer = timed_proposal(pipe, guess, prev, lag, 30)
+        assert answer.tolist() == [False, True, False]
+        assert torch.equal(out[[0, 2]], guess[[0, 2]]) and not torch.equal(out[1], guess[1])
+        kept, none = timed_proposal(pipe, guess, prev, None, 30)  # a bank without lags
+        assert torch.equal(kept, guess) and not none.any()
+    finally:
+        pipe.config.sflow.warm_timing = old
+
+
+def test_warm_timing_must_not_be_negative():
+    from umf.config import set_option, small_config
+    from umf.model_checks import check_config_values
+
+    check_config_values(set_option(small_config(), "sflow.warm_timing=8"))
+    with pytest.raises(UMFError, match="warm_timing"):
+        check_config_values(set_option(small_config(), "sflow.warm_timing=-1"))

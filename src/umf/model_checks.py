@@ -37,7 +37,7 @@ _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every
 
 _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
                  "guidance", "fine_guidance", "person_guidance", "foot_loss", "place_loss",
-                 "joint_loss", "warm_glide", "warm_pace"}  # fmt: skip  # >= 0
+                 "joint_loss", "warm_glide", "warm_pace", "warm_timing"}  # fmt: skip  # >= 0
 
 
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0

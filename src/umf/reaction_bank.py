@@ -10,8 +10,10 @@ A model directory carries them in ``reactions.safetensors``: for each length of 
 (``frames_30``, ``frames_45`` ... feature frames), the VAE's posterior means (N, p, r) of
 people 2..N of the training scenes, cropped to that length in person 1's frame (the crop
 the S-Flow trains on), with their scene captions' embeddings (``text_*``) and their
-pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``). They are
-derived from the training data and carry its licence.
+pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``), and how
+many frames after person 1's the reaction's action starts in the whole scene (``lag_*``,
+:func:`umf.data.relations.action_onset`; negative: before). They are derived from the
+training data and carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
 
@@ -36,6 +38,7 @@ CAPTION = "caption_"  # ... and each reaction's row of them (N,), per length
 # otherwise match no reaction but its own standstill
 PACE_FLOOR = 0.5
 VELOCITY = "velocity_"
+LAG = "lag_"
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
@@ -54,6 +57,10 @@ class ReactionBank:
     # per length, each reaction's pelvis mean floor velocity (N, 2) in m/s, person 1's frame
     # (umf.warm_start.floor_velocity); may be empty
     velocities: dict[int, Tensor] = field(default_factory=dict)
+    # per length, the frames (N,) from person 1's action onset to the reaction's in the scene
+    # (umf.data.relations.action_onset), for an answer retimed to a generated person 1
+    # (sflow.warm_timing); may be empty
+    lags: dict[int, Tensor] = field(default_factory=dict)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
@@ -66,6 +73,7 @@ class ReactionBank:
         path = Path(model_dir) / REACTIONS
         tensors = {f"{PREFIX}{k}": v for k, v in self.latents.items()}
         tensors |= {f"{VELOCITY}{k}": v for k, v in self.velocities.items()}
+        tensors |= {f"{LAG}{k}": v for k, v in self.lags.items()}  # whole frames: exact in fp16
         tensors = {k: v.to(torch.float16) for k, v in tensors.items()}
         if self.texts:
             lengths = sorted(self.texts)
@@ -104,6 +112,8 @@ class ReactionBank:
                     texts[int(k.removeprefix(CAPTION))] = table[rows.long()].float()
             velocities = {int(k.removeprefix(VELOCITY)): v.float() for k, v in raw.items()
                           if k.startswith(VELOCITY)}  # fmt: skip
+            lags = {int(k.removeprefix(LAG)): v.float() for k, v in raw.items()
+                    if k.startswith(LAG)}  # fmt: skip
         except (OSError, ValueError, RuntimeError, IndexError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -119,9 +129,13 @@ class ReactionBank:
             if z is None or v.shape != (len(z), 2) or not torch.isfinite(v).all():
                 raise UMFError(f"{path}: velocities of {frames} frames do not match its "
                                "reactions")  # fmt: skip
+        for frames, v in lags.items():
+            z = latents.get(frames)
+            if z is None or v.shape != (len(z),) or not torch.isfinite(v).all():
+                raise UMFError(f"{path}: lags of {frames} frames do not match its reactions")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents, texts, velocities)
+        return cls(latents, texts, velocities, lags)
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""
@@ -155,7 +169,34 @@ class ReactionBank:
         chosen = torch.zeros(sims.shape, dtype=torch.bool, device=sims.device)
         return chosen.scatter(1, keep, True) & torch.isfinite(sims)
 
-    def nearest(
+    def nearest(self, query: Tensor, frames: int, neighbours: int, *args, **kwargs
+                ) -> tuple[Tensor, Tensor]:  # fmt: skip
+        """:meth:`pick`'s reactions (B, p, r) and (B,) whether each row had one at its pace."""
+        length, idx, at_pace = self.pick(query, frames, neighbours, *args, **kwargs)
+        return self.latents[length].to(query)[idx], at_pace
+
+    def lag(self, frames: int, idx: Tensor) -> Tensor | None:
+        """(B,) the lags (frames) of the reactions ``idx`` of the length :meth:`pick` took
+        for ``frames``; None for a bank without lags (written before them)."""
+        length = self.bucket(frames)
+        return self.lags[length][idx.cpu()] if length in self.lags else None
+
+    def shortlist_lag(self, frames: int, prompt: Tensor | None, shortlist: int,
+                      mirror: Tensor | None = None) -> Tensor | None:  # fmt: skip
+        """(B,) the median lag (frames) of the reactions in each row's caption shortlist
+        (:meth:`pick`'s), at the stored length nearest ``frames``: how long people asked
+        what the prompt asks waited for person 1 in the training scenes. None for a bank
+        without lags or captions, or without a prompt or shortlist."""
+        length = self.bucket(frames)
+        if length not in self.lags or prompt is None:
+            return None
+        allowed = self._shortlisted(length, prompt, shortlist, prompt.float(), mirror)
+        if allowed is None:
+            return None
+        lags = self.lags[length].to(prompt.device)[None].expand(len(allowed), -1)
+        return lags.masked_fill(~allowed, torch.nan).nanmedian(dim=1).values
+
+    def pick(
         self,
         query: Tensor,
         frames: int,
@@ -167,8 +208,9 @@ class ReactionBank:
         velocity: Tensor | None = None,
         pace: float = 0.0,
         mirror: Tensor | None = None,
-    ) -> tuple[Tensor, Tensor]:
-        """For each row of ``query`` (B, p, r) a real reaction (B, p, r): one of the
+    ) -> tuple[int, Tensor, Tensor]:
+        """For each row of ``query`` (B, p, r) a real reaction: the stored length it is of, its
+        index (B,) there and (B,) whether the row had one at its pace. The reaction is one of the
         ``neighbours`` nearest (Euclidean after ``scale``, e.g. the S-Flow's latent
         normaliser) among those of the stored length nearest to ``frames``, drawn uniformly
         with row i's generator. ``prompt`` (B, D) unit sentence embeddings and ``shortlist``
@@ -181,9 +223,9 @@ class ReactionBank:
         :func:`umf.text.mirror_caption`), unit embeddings: the shortlist then holds only
         reactions whose captions are at least as near the prompt as its mirror image, so a
         prompt naming a side retrieves people on that side (a prompt naming none is its own
-        mirror image: no change). Also (B,) whether each row had one within its pace (all
-        True without a pace), so a caller can keep what it had rather than take a reaction at
-        the wrong pace."""
+        mirror image: no change). Whether each row had one within its pace is all True
+        without a pace, so a caller can keep what it had rather than take a reaction at the
+        wrong pace."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
@@ -206,4 +248,4 @@ class ReactionBank:
         # among its own (finite) ones, so no row's pick depends on the others in its batch
         score = randn((query.shape[0], k), generator, device=query.device)
         pick = score.masked_fill(~torch.isfinite(dist), -torch.inf).argmax(dim=1)
-        return bank[idx[torch.arange(query.shape[0], device=query.device), pick]], at_pace
+        return length, idx[torch.arange(query.shape[0], device=query.device), pick], at_pace

@@ -334,6 +334,20 @@ def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) 
     )
 
 
+def shift_in_time(features: Tensor, frames: int) -> Tensor:
+    """``features`` (T, 262) later by ``frames`` (earlier where negative), the length kept:
+    the first (last) pose held still before the motion begins (after it ends), its
+    velocities zero there. A person who waits before acting (an answer to a bow)."""
+    n = features.shape[0]
+    frames = max(-(n - 1), min(n - 1, int(frames)))
+    if frames == 0:
+        return features.clone()
+    still = (features[:1] if frames > 0 else features[-1:]).clone()
+    still[:, VEL] = 0.0
+    held = still.expand(abs(frames), -1)
+    return torch.cat([held, features[:-frames]] if frames > 0 else [features[-frames:], held])
+
+
 def leader_frame(features: Tensor) -> RigidTransform:
     """The map (a turn about +Y and a shift on the floor, heights kept) that puts one
     person's features (T, 262) where :func:`canonicalize_features` puts person 1 of a

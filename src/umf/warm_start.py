@@ -49,10 +49,16 @@ from typing import Any
 import torch
 
 from umf.config import MULTI_PERSON, SINGLE_PERSON
+from umf.data.relations import ONSET_SMOOTHING, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
 from umf.reaction_bank import REACTIONS
-from umf.representation import features_to_joints, leader_frame, transform_features
+from umf.representation import (
+    features_to_joints,
+    leader_frame,
+    shift_in_time,
+    transform_features,
+)
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import mirror_caption
 
@@ -110,12 +116,14 @@ def proposal(
     guidance: float | None,
     own: dict[str, Any],
     mirror: Any = None,
-) -> tuple[Tensor, int, Tensor]:
+) -> tuple[Tensor, int, Tensor, Tensor | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
-    took, and (B,) whether it fits the row (a retrieved one at the first pass's pace, with
-    ``sflow.warm_pace``; module notes). ``mirror``: the prompts' mirror images
-    (:func:`mirror_text`), for retrieval on the side a prompt names."""
+    took, (B,) whether it fits the row (a retrieved one at the first pass's pace, with
+    ``sflow.warm_pace``; module notes) and, for a retrieved one from a bank that stores
+    them, (B,) how many frames after its own person 1's its action started (else None).
+    ``mirror``: the prompts' mirror images (:func:`mirror_text`), for retrieval on the side
+    a prompt names."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -127,13 +135,20 @@ def proposal(
         prompt = unit(text.pooled.float(), dim=-1)
         side = None if mirror is None else unit(mirror.pooled.float(), dim=-1)
         velocity = floor_velocity(decoded, pipe.config.fps) if cfg.warm_pace > 0 else None
-        z, fits = pipe.reactions.nearest(first, decoded.shape[1], cfg.warm_neighbours, generator,
-                                         pipe.sflow.latent_norm.normalize, prompt,
-                                         cfg.warm_shortlist, velocity, cfg.warm_pace,
-                                         side)  # fmt: skip
-        return z, 0, fits
+        bank, frames = pipe.reactions, decoded.shape[1]
+        length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
+                                      pipe.sflow.latent_norm.normalize, prompt,
+                                      cfg.warm_shortlist, velocity, cfg.warm_pace,
+                                      side)  # fmt: skip
+        lag = bank.lag(frames, idx)
+        if lag is not None:  # an answer only where the prompt's shortlist mostly answers too
+            usual = bank.shortlist_lag(frames, prompt, cfg.warm_shortlist, side)
+            lag = lag.to(first.device)
+            if usual is not None:
+                lag = torch.where(usual.to(lag) >= cfg.warm_timing, lag, torch.zeros_like(lag))
+        return bank.latents[length].to(first)[idx], 0, fits, lag
     z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
-    return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
+    return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device), None
 
 
 def pflow_proposal(
@@ -172,6 +187,50 @@ def mirror_text(pipe: Any, words: list[str]) -> Any:
         return None
     mirrored = [mirror_caption(w) for w in words]
     return None if mirrored == list(words) else pipe.text_encoder.encode(mirrored).to(pipe.device)
+
+
+def onsets(features: Tensor) -> list[int]:
+    """Each row's action onset (frame) in features (B, T, 262), as the relation checks read
+    it (:func:`umf.data.relations.action_onset`, averaged over ``ONSET_SMOOTHING``)."""
+    joints = features_to_joints(features.detach().float()).cpu().numpy()
+    return [action_onset(j, smooth=ONSET_SMOOTHING) for j in joints]
+
+
+def retime(reaction: Tensor, leader: Tensor, lag: Tensor, passes: int = 2) -> Tensor:
+    """Each row of ``reaction`` (B, T, 262) moved in time
+    (:func:`umf.representation.shift_in_time`) so that its action starts ``lag`` (B,) frames
+    after that of the same row of ``leader`` (B, T, 262), as the checks read onsets. The
+    reading moves a little with the frames held and cut, so the shift is corrected on the
+    moved motion (``passes`` readings in all)."""
+    want = [o + round(float(x)) for o, x in zip(onsets(leader), lag, strict=True)]
+    shift = [0] * reaction.shape[0]
+    out = reaction
+    for _ in range(passes):
+        shift = [s + w - o for s, w, o in zip(shift, want, onsets(out), strict=True)]
+        out = torch.stack([shift_in_time(r, s) for r, s in zip(reaction, shift, strict=True)])
+    return out
+
+
+def timed_proposal(pipe: Any, guess: Tensor, prev: Tensor, lag: Tensor | None,
+                   frames: int) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """With ``sflow.warm_timing`` > 0, the retrieved reactions ``guess`` (B, p, r) whose
+    action started at least that many frames after their own person 1's (``lag`` (B,), from
+    the bank) moved in time to start as long after the generated person 1 (``prev[:, 0]``),
+    re-encoded; the others as they were. Also (B,) which rows were moved: answers that wait
+    (a bow back, a response to a call) the S-Flow's first pass gives at the average delay it
+    saw, between the answer and a greeting exchanged together (module notes)."""
+    answer = torch.zeros(guess.shape[0], dtype=torch.bool, device=guess.device)
+    if pipe.config.sflow.warm_timing <= 0 or lag is None:
+        return guess, answer
+    answer = lag >= pipe.config.sflow.warm_timing
+    if not answer.any():
+        return guess, answer
+    rows = answer.nonzero().flatten()
+    leader = pipe.decode(prev[rows, 0], frames)  # person 1 as the pipeline decodes them
+    moved = retime(pipe.decode(guess[rows], frames, reaction=True), leader, lag[rows])
+    out = guess.clone()
+    out[rows] = pipe._encode(moved).to(out)
+    return out, answer
 
 
 def warm_rows(decoded: Tensor, fits: Tensor, fps: float, glide: float) -> Tensor:
@@ -213,10 +272,11 @@ def sample_added(
         return w, nfe + m + n
     if cfg.warm_start:
         decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
-        guess, m, fits = proposal(pipe, w, decoded, text, uncond, generator, pflow_guidance, own,
-                                  mirror=mirror)  # fmt: skip
+        guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
+                                       pflow_guidance, own, mirror=mirror)  # fmt: skip
+        guess, answer = timed_proposal(pipe, guess, prev, lag, frames)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
-        take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide)
+        take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer
         w = torch.where(take[:, None, None], again, w)
     return w, nfe

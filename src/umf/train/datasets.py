@@ -500,6 +500,17 @@ class SceneDataset(_EpochDataset):
         recipe = crop_recipe(item, self.corpus.actors(), start, length + 1)
         return torch.from_numpy(self.corpus.scene_features(recipe))
 
+    def whole(self, index: int) -> Tensor:
+        """The whole scene or take item ``index`` crops from, features (N, T, 262)
+        de-normalised, neither mirrored nor carried on: what a crop's people did before and
+        after it (an answer's delay, :mod:`umf.train.reactions`)."""
+        kind, item, tf = self.items[index]
+        total = (item.num_frames if kind == "clip" else item["num_frames"]) - 1
+        if kind == "clip":
+            return _clip_crop(item, tf, range(item.num_people), 0, total)
+        recipe = crop_recipe(item, self.corpus.actors(), 0, total + 1)
+        return torch.from_numpy(self.corpus.scene_features(recipe))
+
     def __getitem__(self, index: int) -> dict[str, Any]:
         kind, item, tf = self.items[index]
         rng = self._rng(index)

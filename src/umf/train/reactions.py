@@ -12,8 +12,10 @@ from tqdm import tqdm
 
 from umf.coverage import embed
 from umf.data.corpus import Corpus
+from umf.data.relations import ONSET_SMOOTHING, action_onset
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
+from umf.representation import features_to_joints
 from umf.train.datasets import SceneDataset
 from umf.warm_start import floor_velocity
 
@@ -42,10 +44,11 @@ def build_reaction_bank(
     """People 2..N of the train split's scenes and real takes, cropped to each length in
     person 1's frame (mirrored at random, as in training; short striding scenes carried on
     where the S-Flow's ``train_sflow.repeat_scene_gait`` says), as the VAE's posterior means, with
-    their scene's caption embedded by the model's text encoder and their pelvis's mean floor
-    velocity; at most ``per_length`` per length, drawn with ``seed``. A length no scene is
-    long enough for is left out; a corpus without multi-person train scenes raises
-    :class:`NoReactions`."""
+    their scene's caption embedded by the model's text encoder, their pelvis's mean floor
+    velocity and how many frames after person 1's their action starts in the whole scene
+    (a crop may cut either onset); at most ``per_length`` per length, drawn with ``seed``.
+    A length no scene is long enough for is left out; a corpus without multi-person train
+    scenes raises :class:`NoReactions`."""
     corpus = Corpus.load(corpus_dir)
     if not corpus.scenes.get("train") and not any(
         c.num_people > 1 for c in corpus.split_clips("train")
@@ -56,17 +59,23 @@ def build_reaction_bank(
     latents: dict[int, torch.Tensor] = {}
     texts: dict[int, torch.Tensor] = {}
     velocities: dict[int, torch.Tensor] = {}
+    lags: dict[int, torch.Tensor] = {}
+    whole_lags: dict[str, list[int]] = {}  # per scene or take, its people's delays
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
                           max_frames=frames, mirror=True, seed=seed,
                           repeat_gait=pipe.config.train_sflow.repeat_scene_gait)  # fmt: skip
-        people, captions = [], []
+        people, captions, lag = [], [], []
         for i in range(len(ds)):
             item = ds[i]
             f = item["features"]
             if f.shape[1] == frames:
                 people.extend(f[1:])
                 captions.extend([item["caption"]] * (f.shape[0] - 1))
+                if item["id"] not in whole_lags:  # a scene served again: the same delays
+                    onsets = scene_onsets(ds.whole(i))
+                    whole_lags[item["id"]] = [o - onsets[0] for o in onsets[1:]]
+                lag.extend(whole_lags[item["id"]])
         if not people:
             log(f"reactions: no train scene has {frames} frames; that length is left out")
             continue
@@ -77,12 +86,20 @@ def build_reaction_bank(
         distinct = sorted(set(chosen))  # a scene's caption is shared by its people and crops
         row = {c: i for i, c in enumerate(distinct)}
         texts[frames] = embed(pipe.text_encoder, distinct)[[row[c] for c in chosen]]
+        lags[frames] = torch.tensor([lag[i] for i in keep], dtype=torch.float32)
         velocities[frames] = floor_velocity(pipe.normalizer.denormalize(x.cpu()), pipe.config.fps)
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
     if not latents:
         raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
-    return ReactionBank(latents, texts, velocities)
+    return ReactionBank(latents, texts, velocities, lags)
+
+
+def scene_onsets(features: torch.Tensor) -> list[int]:
+    """Each person's action onset (frame, :func:`umf.data.relations.action_onset`) in a
+    scene's features (N, T, 262), as the relation checks read it."""
+    return [action_onset(j, smooth=ONSET_SMOOTHING)
+            for j in features_to_joints(features.float()).numpy()]  # fmt: skip
 
 
 def write_reactions(
