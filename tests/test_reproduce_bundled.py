@@ -132,6 +132,11 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert stages["name"][0][2:4] == [str(final), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
+    config = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "config.json").read_text())
+    for option in rb.NAMED:  # every sampling option the name stage sets, the shipped model has
+        key, value = option.split("=", 1)
+        stage, field = key.split(".")
+        assert json.dumps(config[stage][field]) == value or str(config[stage][field]) == value
 
 
 def _sets(command: list[str]) -> list[str]:
