@@ -457,17 +457,50 @@ def test_the_bank_stores_how_long_each_reaction_waited_in_its_whole_scene(corpus
         ReactionBank.load(tmp_path)
 
 
-def test_shortlist_lag_is_the_median_wait_of_the_captions_nearest_the_prompt():
-    latents = torch.randn(5, P, R, generator=torch.Generator().manual_seed(8))
-    texts = torch.nn.functional.normalize(torch.tensor(
-        [[1.0, 0.0], [1.0, 0.1], [1.0, 0.2], [0.0, 1.0], [0.1, 1.0]]), dim=-1)  # fmt: skip
-    lags = torch.tensor([20.0, 30.0, 26.0, 0.0, -2.0])
-    bank = ReactionBank({30: latents}, {30: texts}, lags={30: lags})
-    prompts = torch.nn.functional.normalize(torch.tensor([[1.0, 0.05], [0.05, 1.0]]), dim=-1)
-    assert bank.shortlist_lag(33, prompts, 3).tolist() == [26.0, 0.0]
-    assert bank.shortlist_lag(33, prompts, 2).tolist() == [20.0, -2.0]  # torch: the lower
-    assert bank.shortlist_lag(33, None, 3) is None and bank.shortlist_lag(33, prompts, 0) is None
-    assert ReactionBank({30: latents}, {30: texts}).shortlist_lag(30, prompts, 3) is None
-    length, idx, _ = bank.pick(latents[[2, 4]] + 0.01, 30, 1)
-    assert length == 30 and idx.tolist() == [2, 4]
-    assert bank.lag(30, idx).tolist() == [26.0, -2.0]
+def test_caption_waits_and_where_the_bank_keeps_a_prompts_captions():
+    """``caption_waits``: the median wait of the reactions of the prompt's nearest caption
+    (ties), and how many; ``caption_length``: the stored length nearest the request among
+    those that hold that caption; ``pick`` / ``lag``: a reaction's index and its wait."""
+    g = torch.Generator().manual_seed(8)
+    spar, walk = torch.nn.functional.normalize(torch.tensor([[1.0, 0.0], [0.0, 1.0]]), dim=-1)
+    near_spar = torch.nn.functional.normalize(torch.tensor([1.0, 0.3]), dim=0)
+    bank = ReactionBank(
+        {285: torch.randn(5, P, R, generator=g), 300: torch.randn(3, P, R, generator=g)},
+        {285: torch.stack([spar, spar, spar, near_spar, walk]), 300: torch.stack([walk] * 3)},
+        lags={285: torch.tensor([20.0, 30.0, 26.0, 0.0, 0.0]), 300: torch.zeros(3)},
+    )
+    prompts = torch.stack([spar, walk])
+    median, count = bank.caption_waits(285, prompts)
+    assert median.tolist() == [26.0, 0.0] and count.tolist() == [3, 1]
+    assert bank.caption_length(300, prompts) == [285, 300]  # no spar stored at 300
+    assert bank.caption_length(290, prompts[1:]) == [285]  # walks at both: the nearest
+    assert ReactionBank({30: torch.zeros(2, P, R)}).caption_waits(30, prompts) is None
+    length, idx, _ = bank.pick(bank.latents[285][[2, 4]] + 0.01, 280, 1)
+    assert length == 285 and idx.tolist() == [2, 4]
+    assert bank.lag(280, idx).tolist() == [26.0, 0.0]
+
+
+def test_an_answer_is_retrieved_where_its_caption_is_stored_with_its_wait():
+    """``umf.warm_start.answers``: a spar asked for 300 frames takes one of the spar
+    reactions stored at 285 and its wait; a walk keeps its reaction and waits 0; below
+    ``warm_timing`` nobody answers."""
+    from types import SimpleNamespace
+
+    from umf.warm_start import answers
+
+    g = torch.Generator().manual_seed(9)
+    spar, walk = torch.nn.functional.normalize(torch.tensor([[1.0, 0.0], [0.0, 1.0]]), dim=-1)
+    bank = ReactionBank(
+        {285: torch.randn(4, P, R, generator=g), 300: torch.randn(2, P, R, generator=g)},
+        {285: torch.stack([spar, spar, walk, walk]), 300: torch.stack([walk, walk])},
+        lags={285: torch.tensor([18.0, 24.0, 0.0, 0.0]), 300: torch.zeros(2)},
+    )
+    first = bank.latents[285][[1, 2]] + 0.01  # a first pass nearest spar 1, one near a walk
+    z0 = bank.latents[300][[0, 1]]  # what the usual retrieval at 300 frames gave
+    cfg = SimpleNamespace(warm_timing=8.0, warm_neighbours=1)
+    z, waits = answers(bank, first, 300, z0, cfg, None, lambda x: x, torch.stack([spar, walk]))
+    assert torch.equal(z[0], bank.latents[285][1]) and waits.tolist() == [24.0, 0.0]
+    assert torch.equal(z[1], z0[1])
+    cfg.warm_timing = 30.0  # the spars waited 21 frames at the median: no answer
+    z, waits = answers(bank, first, 300, z0, cfg, None, lambda x: x, torch.stack([spar, walk]))
+    assert torch.equal(z, z0) and not waits.any()

@@ -181,20 +181,34 @@ class ReactionBank:
         length = self.bucket(frames)
         return self.lags[length][idx.cpu()] if length in self.lags else None
 
-    def shortlist_lag(self, frames: int, prompt: Tensor | None, shortlist: int,
-                      mirror: Tensor | None = None) -> Tensor | None:  # fmt: skip
-        """(B,) the median lag (frames) of the reactions in each row's caption shortlist
-        (:meth:`pick`'s), at the stored length nearest ``frames``: how long people asked
-        what the prompt asks waited for person 1 in the training scenes. None for a bank
-        without lags or captions, or without a prompt or shortlist."""
+    def caption_waits(self, frames: int, prompt: Tensor) -> tuple[Tensor, Tensor] | None:
+        """Per row of ``prompt`` (B, D) unit embeddings, at the stored length nearest
+        ``frames``: the median lag (frames) of the reactions whose caption is the nearest
+        to the prompt (ties within ``SAME_SIDE``), and how many they are. How long people
+        asked what the prompt asks waited for person 1 in the training scenes. None for a
+        bank without lags or captions."""
         length = self.bucket(frames)
-        if length not in self.lags or prompt is None:
+        if length not in self.lags or length not in self.texts:
             return None
-        allowed = self._shortlisted(length, prompt, shortlist, prompt.float(), mirror)
-        if allowed is None:
-            return None
-        lags = self.lags[length].to(prompt.device)[None].expand(len(allowed), -1)
-        return lags.masked_fill(~allowed, torch.nan).nanmedian(dim=1).values
+        sims = prompt.float() @ self.texts[length].to(prompt.device).T  # (B, N)
+        group = sims >= sims.amax(dim=1, keepdim=True) - SAME_SIDE
+        lags = self.lags[length].to(prompt.device)[None].expand(len(group), -1)
+        median = lags.masked_fill(~group, torch.nan).nanmedian(dim=1).values
+        return median, group.sum(dim=1)
+
+    def caption_length(self, frames: int, prompt: Tensor) -> list[int]:
+        """Per row of ``prompt`` (B, D) unit embeddings, the stored length nearest ``frames``
+        (the shorter on a tie) among those whose captions come as near the prompt as any
+        length's do: where the bank keeps reactions of what the prompt asks. A bank without
+        captions: the length nearest ``frames`` for every row."""
+        lengths = [k for k in self.lengths() if k in self.texts]
+        if not lengths:
+            return [self.bucket(frames)] * len(prompt)
+        best = torch.stack([(prompt.float() @ self.texts[k].to(prompt.device).T).amax(dim=1)
+                            for k in lengths], dim=1)  # fmt: skip  # (B, L)
+        near = best >= best.amax(dim=1, keepdim=True) - SAME_SIDE
+        return [min((k for k, ok in zip(lengths, row, strict=True) if ok),
+                    key=lambda k: (abs(k - frames), k)) for row in near.tolist()]  # fmt: skip
 
     def pick(
         self,

@@ -120,8 +120,9 @@ def proposal(
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
     took, (B,) whether it fits the row (a retrieved one at the first pass's pace, with
-    ``sflow.warm_pace``; module notes) and, for a retrieved one from a bank that stores
-    them, (B,) how many frames after its own person 1's its action started (else None).
+    ``sflow.warm_pace``; module notes) and, with ``sflow.warm_timing`` and a bank that
+    stores waits, (B,) how many frames after its own person 1's each answer started (0 for
+    a row that does not answer; :func:`answers`), else None.
     ``mirror``: the prompts' mirror images (:func:`mirror_text`), for retrieval on the side
     a prompt names."""
     cfg = pipe.config.sflow
@@ -140,15 +141,38 @@ def proposal(
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
                                       side)  # fmt: skip
-        lag = bank.lag(frames, idx)
-        if lag is not None:  # an answer only where the prompt's shortlist mostly answers too
-            usual = bank.shortlist_lag(frames, prompt, cfg.warm_shortlist, side)
-            lag = lag.to(first.device)
-            if usual is not None:
-                lag = torch.where(usual.to(lag) >= cfg.warm_timing, lag, torch.zeros_like(lag))
-        return bank.latents[length].to(first)[idx], 0, fits, lag
+        z, lag = bank.latents[length].to(first)[idx], None
+        if bank.lags and cfg.warm_timing > 0:
+            z, lag = answers(bank, first, frames, z, cfg, generator,
+                             pipe.sflow.latent_norm.normalize, prompt)  # fmt: skip
+        return z, 0, fits, lag
     z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
     return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device), None
+
+
+def answers(bank: Any, first: Tensor, frames: int, z: Tensor, cfg: Any, generator: Any,
+            scale: Any, prompt: Tensor) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """The retrieved reactions ``z`` (B, p, r) with their waits (B,), for a warm start that
+    retimes answers (``sflow.warm_timing`` w > 0). A row answers when the reactions of its
+    prompt's nearest caption waited a median of at least w frames
+    (:meth:`ReactionBank.caption_waits`), read at the stored length nearest ``frames``
+    among those holding that caption (:meth:`ReactionBank.caption_length`: a 10-second
+    spar asks the bank at 300 frames, which only carried-on walks, runs and real takes
+    fill, and finds its answers at 285). Its reaction is then retrieved among that
+    caption's (nearest the first pass, as always) with its own wait; every other row keeps
+    ``z`` and waits 0."""
+    z, waits = z.clone(), torch.zeros(len(z), device=z.device)
+    where = bank.caption_length(frames, prompt)
+    for i, length in enumerate(where):
+        found = bank.caption_waits(length, prompt[i : i + 1])
+        if found is None or float(found[0][0]) < cfg.warm_timing:
+            continue
+        gen = generator[i] if isinstance(generator, list | tuple) else generator
+        _, idx, _ = bank.pick(first[i : i + 1], length, cfg.warm_neighbours, gen, scale,
+                              prompt[i : i + 1], int(found[1][0]))  # fmt: skip
+        z[i] = bank.latents[length].to(z)[idx[0]]
+        waits[i] = bank.lag(length, idx)[0]
+    return z, waits
 
 
 def pflow_proposal(
