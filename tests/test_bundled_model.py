@@ -198,7 +198,7 @@ def test_a_bow_back_waits_for_the_bow(pipe):
     least 8 frames after person 1's (the starts_after check's reading) in at least 7 seeds,
     and 15 frames later at the median. The S-Flow alone answers at the average delay it saw
     (20261209: 5 of 8 seeds, median 11 frames); ``sflow.warm_timing`` moves the retrieved
-    real answer to wait as long as it did (8 of 8, median 21; results/umf-small-bandai-20261210)."""
+    real answer to wait as long as it did (7 of 8, median 19; results/umf-small-bandai-20261210)."""
     from umf.data.relations import ONSET_SMOOTHING, action_onset
 
     lags = []

@@ -424,10 +424,11 @@ def test_a_rows_pick_does_not_depend_on_the_others_in_its_batch():
         assert torch.equal(a, b), seed
 
 
-def test_the_bank_stores_how_long_each_reaction_waited_in_its_whole_scene(corpus, model, tmp_path):
-    """``lags``: per reaction, its action onset minus person 1's in the whole scene it was
-    cropped from (as the checks read onsets), whatever the crop cut; kept by the file, a
-    row of the wrong length refused."""
+def test_the_bank_stores_how_long_each_answer_waited_in_its_whole_scene(corpus, model, tmp_path):
+    """``lags``: per reaction whose relation answers person 1 (a starts_after check on it),
+    its action onset minus person 1's in the whole scene it was cropped from (as the checks
+    read onsets), whatever the crop cut; 0 for everybody else. Kept by the file; a row of
+    the wrong length refused."""
     from safetensors.torch import load_file, save_file
 
     from umf.data.corpus import Corpus
@@ -439,15 +440,17 @@ def test_the_bank_stores_how_long_each_reaction_waited_in_its_whole_scene(corpus
                                log=lambda m: None)  # fmt: skip
     ds = SceneDataset(Corpus.load(corpus), "train", pipe.normalizer, min_frames=30,
                       max_frames=30, mirror=True, seed=0)  # fmt: skip
-    want = []
+    want, answers = [], 0
     for i in range(len(ds)):
-        people = ds[i]["features"].shape[0]
-        if ds[i]["features"].shape[1] == 30:
-            onsets = scene_onsets(ds.whole(i))
-            assert len(onsets) == people
-            want += [o - onsets[0] for o in onsets[1:]]
+        if ds[i]["features"].shape[1] != 30:
+            continue
+        _, record, _ = ds.items[i]
+        onsets = scene_onsets(ds.whole(i))
+        waits = {c["b"] for c in record["constraints"] if c["type"] == "starts_after"}
+        answers += len(waits)
+        want += [o - onsets[0] if k in waits else 0 for k, o in enumerate(onsets[1:], 1)]
     assert bank.lags[30].tolist() == want
-    assert any(want)  # the fixture's composed scenes wait
+    assert answers and any(want)  # the fixture's composed scenes hold answers that wait
     path = bank.save(tmp_path)
     assert torch.equal(ReactionBank.load(tmp_path).lags[30], bank.lags[30])
     raw = load_file(str(path))

@@ -10,9 +10,10 @@ A model directory carries them in ``reactions.safetensors``: for each length of 
 (``frames_30``, ``frames_45`` ... feature frames), the VAE's posterior means (N, p, r) of
 people 2..N of the training scenes, cropped to that length in person 1's frame (the crop
 the S-Flow trains on), with their scene captions' embeddings (``text_*``) and their
-pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``), and how
-many frames after person 1's the reaction's action starts in the whole scene (``lag_*``,
-:func:`umf.data.relations.action_onset`; negative: before). They are derived from the
+pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``), and, for
+a person whose relation answers person 1 (a bow back, a response), how many frames after
+person 1's their action starts in the whole scene (``lag_*``,
+:func:`umf.data.relations.action_onset`; 0 for everybody else). They are derived from the
 training data and carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
@@ -57,7 +58,7 @@ class ReactionBank:
     # per length, each reaction's pelvis mean floor velocity (N, 2) in m/s, person 1's frame
     # (umf.warm_start.floor_velocity); may be empty
     velocities: dict[int, Tensor] = field(default_factory=dict)
-    # per length, the frames (N,) from person 1's action onset to the reaction's in the scene
+    # per length, the frames (N,) from person 1's action onset to an answer's in its scene
     # (umf.data.relations.action_onset), for an answer retimed to a generated person 1
     # (sflow.warm_timing); may be empty
     lags: dict[int, Tensor] = field(default_factory=dict)

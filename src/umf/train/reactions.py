@@ -45,8 +45,9 @@ def build_reaction_bank(
     person 1's frame (mirrored at random, as in training; short striding scenes carried on
     where the S-Flow's ``train_sflow.repeat_scene_gait`` says), as the VAE's posterior means, with
     their scene's caption embedded by the model's text encoder, their pelvis's mean floor
-    velocity and how many frames after person 1's their action starts in the whole scene
-    (a crop may cut either onset); at most ``per_length`` per length, drawn with ``seed``.
+    velocity and, for people who answer person 1, how many frames after person 1's their
+    action starts in the whole scene (a crop may cut either onset; :func:`answer_waits`);
+    at most ``per_length`` per length, drawn with ``seed``.
     A length no scene is long enough for is left out; a corpus without multi-person train
     scenes raises :class:`NoReactions`."""
     corpus = Corpus.load(corpus_dir)
@@ -73,8 +74,7 @@ def build_reaction_bank(
                 people.extend(f[1:])
                 captions.extend([item["caption"]] * (f.shape[0] - 1))
                 if item["id"] not in whole_lags:  # a scene served again: the same delays
-                    onsets = scene_onsets(ds.whole(i))
-                    whole_lags[item["id"]] = [o - onsets[0] for o in onsets[1:]]
+                    whole_lags[item["id"]] = answer_waits(ds, i)
                 lag.extend(whole_lags[item["id"]])
         if not people:
             log(f"reactions: no train scene has {frames} frames; that length is left out")
@@ -93,6 +93,25 @@ def build_reaction_bank(
     if not latents:
         raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
     return ReactionBank(latents, texts, velocities, lags)
+
+
+def answer_waits(ds: SceneDataset, index: int) -> list[int]:
+    """For people 2..N of the scene item ``index`` crops from: the frames from person 1's
+    action onset to theirs in the whole scene, for those its relation says answer person 1
+    (a ``starts_after`` check from person 1 to them: a bow back, a response, an audience);
+    0 for everybody else. People who act together (walking side by side, a real salsa take)
+    start when they start, and their onsets differ for no reason a prompt names: read as
+    waits, the salsa follower turned into an answer and stopped facing the leader."""
+    kind, item, _ = ds.items[index]
+    people = item.num_people if kind == "clip" else len(item["people"])
+    answering = set()
+    if kind == "scene":
+        answering = {c["b"] for c in item["constraints"]
+                     if c["type"] == "starts_after" and c.get("a", 0) == 0}  # fmt: skip
+    if not answering:
+        return [0] * (people - 1)
+    onsets = scene_onsets(ds.whole(index))
+    return [onsets[k] - onsets[0] if k in answering else 0 for k in range(1, people)]
 
 
 def scene_onsets(features: torch.Tensor) -> list[int]:
