@@ -501,9 +501,58 @@ def test_an_answer_is_retrieved_where_its_caption_is_stored_with_its_wait():
     first = bank.latents[285][[1, 2]] + 0.01  # a first pass nearest spar 1, one near a walk
     z0 = bank.latents[300][[0, 1]]  # what the usual retrieval at 300 frames gave
     cfg = SimpleNamespace(warm_timing=8.0, warm_neighbours=1)
-    z, waits = answers(bank, first, 300, z0, cfg, None, lambda x: x, torch.stack([spar, walk]))
+    z, waits, stored = answers(bank, first, 300, z0, cfg, None, lambda x: x,
+                               torch.stack([spar, walk]))  # fmt: skip
     assert torch.equal(z[0], bank.latents[285][1]) and waits.tolist() == [24.0, 0.0]
+    assert stored == [285, 300]
     assert torch.equal(z[1], z0[1])
-    cfg.warm_timing = 30.0  # the spars waited 21 frames at the median: no answer
-    z, waits = answers(bank, first, 300, z0, cfg, None, lambda x: x, torch.stack([spar, walk]))
+    cfg.warm_timing = 30.0  # the spars waited 18 frames at the (lower) median: no answer
+    z, waits, _ = answers(bank, first, 300, z0, cfg, None, lambda x: x,
+                          torch.stack([spar, walk]))  # fmt: skip
     assert torch.equal(z, z0) and not waits.any()
+
+
+def test_the_pipeline_retimes_answers_and_only_answers(corpus, model):
+    """End to end on a tiny model: with ``sflow.warm_timing`` a prompt whose caption's
+    reactions wait gets another person 2 (its answer retimed and taken), a prompt whose
+    don't is sampled as without it, and re-rolling person 1 (who answers nobody) too."""
+    from umf.coverage import embed
+    from umf.data.corpus import Corpus
+
+    pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
+    pipe.reactions = build_reaction_bank(corpus, pipe, lengths=[30, 45], progress=False,
+                                         log=lambda m: None)  # fmt: skip
+    scenes = Corpus.load(corpus).scenes["train"]
+    waits = {r["captions"][0] for r in scenes
+             if any(c["type"] == "starts_after" for c in r["constraints"])}  # fmt: skip
+    still = {r["captions"][0] for r in scenes} - waits
+    assert waits and still
+    answer, other = sorted(waits)[0], sorted(still)[0]
+    median = pipe.reactions.caption_waits(30, embed(pipe.text_encoder, [answer]))[0]
+    assert float(median[0]) >= 1  # the fixture's answer waits
+    cfg = pipe.config.sflow
+
+    source = pipe(answer, num_people=2, seconds=1.0, seed=0, fit=False, separate=False)[0]
+
+    def both(prompt: str, person: int | None = None):
+        out = []
+        for timing in (0.0, 1.0):
+            cfg.warm_timing = timing
+            if person is None:
+                out.append(pipe(prompt, num_people=2, seconds=1.0, seed=0, fit=False,
+                                separate=False)[0])  # fmt: skip
+            else:
+                out.append(pipe.reroll(source, person, seed=3, anchor=False, separate=False))
+        cfg.warm_timing = 0.0
+        return out
+
+    off, on = both(answer)
+    assert np.array_equal(off.joints[0], on.joints[0]) and not np.allclose(
+        off.joints[1], on.joints[1]
+    )
+    off, on = both(other)
+    assert np.array_equal(off.joints, on.joints)
+    off, on = both(answer, person=1)  # person 1 re-rolled: the same with the option
+    assert np.array_equal(off.joints, on.joints)
+    off, on = both(answer, person=2)  # person 2 re-rolled: answers again
+    assert not np.allclose(off.joints[1], on.joints[1])

@@ -405,10 +405,22 @@ def test_shift_in_time_holds_the_first_or_last_pose_still_and_keeps_the_length(r
         torch.testing.assert_close(later[t, rep.ROT], f[0, rep.ROT])
         assert float(later[t, rep.VEL].abs().max()) == 0.0
     earlier = rep.shift_in_time(f, -5)
-    torch.testing.assert_close(earlier[: n - 5], f[5:])
-    torch.testing.assert_close(earlier[n - 5 :, rep.POS], f[-1:, rep.POS].expand(5, -1))
+    torch.testing.assert_close(earlier[: n - 6], f[5:-1])
+    torch.testing.assert_close(earlier[n - 6 :, rep.POS], f[-1:, rep.POS].expand(6, -1))
+    assert float(earlier[n - 6 :, rep.VEL].abs().max()) == 0.0  # nothing moves after the end
     torch.testing.assert_close(rep.shift_in_time(f, 0), f)
     torch.testing.assert_close(rep.shift_in_time(f, 10 * n)[-1, rep.POS], f[0, rep.POS])  # clamped
     # held frames are still, so the decoded joints do not move there
     j = rep.features_to_joints(later)
     assert float((j[1:7] - j[:6]).abs().max()) < 1e-6
+
+
+def test_hold_to_length_cuts_or_holds_the_last_pose(real_joints):
+    f = rep.assemble_features(real_joints, rep.joints_to_rot6d(real_joints))
+    n = f.shape[0]
+    torch.testing.assert_close(rep.hold_to_length(f, n - 10), f[: n - 10])
+    longer = rep.hold_to_length(f, n + 8)
+    assert longer.shape == (n + 8, f.shape[1])
+    torch.testing.assert_close(longer[: n - 1], f[:-1])
+    torch.testing.assert_close(longer[n - 1 :, rep.ROT], f[-1:, rep.ROT].expand(9, -1))
+    assert float(longer[n - 1 :, rep.VEL].abs().max()) == 0.0

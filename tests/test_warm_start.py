@@ -308,29 +308,40 @@ def test_retime_makes_an_answer_wait_as_long_after_the_leader(bandai_clips):
     assert out.shape == reaction.shape
 
 
-def test_warm_timing_retimes_only_answers(models):
-    """``sflow.warm_timing``: rows whose retrieved reaction waited at least that long are
-    moved in time and re-encoded (and so replace the first pass); the others, a bank
-    without lags, and the option off keep the proposal as it was."""
-    from umf.warm_start import timed_proposal
+def test_warm_timing_retimes_only_answers(models, monkeypatch):
+    """``sflow.warm_timing``: rows whose answer waited at least that long are decoded at the
+    length they were stored at, carried on to the scene's (the last pose held), moved in
+    time after person 1 by their wait and re-encoded; the others, a bank without waits, a
+    re-rolled person 1 and the option off keep the proposal as it was."""
+    import umf.warm_start as ws
+    from umf.representation import VEL
 
     pipe = models["warm"]
     g = torch.Generator().manual_seed(0)
     guess = torch.randn(3, *pipe.vae.latent_shape, generator=g)
     prev = torch.randn(3, 1, *pipe.vae.latent_shape, generator=g)
-    lag = torch.tensor([0.0, 20.0, 7.0])
-    same, answer = timed_proposal(pipe, guess, prev, lag, 30)
+    timing = (torch.tensor([0.0, 20.0, 7.0]), [30, 15, 30])  # row 1 stored at 15 frames
+    same, answer = ws.timed_proposal(pipe, guess, prev, timing, 30)
     assert torch.equal(same, guess) and not answer.any()  # off (0)
-    old = pipe.config.sflow.warm_timing
-    try:
-        pipe.config.sflow.warm_timing = 8.0
-        out, answer = timed_proposal(pipe, guess, prev, lag, 30)
-        assert answer.tolist() == [False, True, False]
-        assert torch.equal(out[[0, 2]], guess[[0, 2]]) and not torch.equal(out[1], guess[1])
-        kept, none = timed_proposal(pipe, guess, prev, None, 30)  # a bank without lags
-        assert torch.equal(kept, guess) and not none.any()
-    finally:
-        pipe.config.sflow.warm_timing = old
+    seen = {}
+
+    def spy(reaction, leader, lag, passes=2):
+        seen.update(reaction=reaction, leader=leader, lag=lag)
+        return reaction.flip(1)  # something the re-encoding must carry
+
+    monkeypatch.setattr(ws, "retime", spy)
+    monkeypatch.setattr(pipe.config.sflow, "warm_timing", 8.0)
+    out, answer = ws.timed_proposal(pipe, guess, prev, timing, 30)
+    assert answer.tolist() == [False, True, False]
+    assert torch.equal(out[[0, 2]], guess[[0, 2]])
+    assert seen["lag"].tolist() == [20.0] and seen["reaction"].shape == (1, 30, 262)
+    torch.testing.assert_close(seen["leader"], pipe.decode(prev[[1], 0], 30))
+    own = pipe.decode(guess[[1]], 15, reaction=True)[0]
+    torch.testing.assert_close(seen["reaction"][0, :14], own[:14])  # its own 15 frames ...
+    assert float(seen["reaction"][0, 14:, VEL].abs().max()) == 0.0  # ... then held still
+    torch.testing.assert_close(out[[1]], pipe._encode(seen["reaction"].flip(1)))
+    kept, none = ws.timed_proposal(pipe, guess, prev, None, 30)  # no waits in the bank
+    assert torch.equal(kept, guess) and not none.any()
 
 
 def test_warm_timing_must_not_be_negative():

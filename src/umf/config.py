@@ -223,10 +223,11 @@ class SFlowConfig:
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
     # as near it as its mirror image (side words swapped): people on the side it names
     warm_side: bool = False
-    # > 0: a retrieved reaction whose action started at least this many frames after its
-    # own person 1's (the bank's lags) is moved in time to start as long after the generated
-    # person 1, and replaces the first pass whether it glides or not: the first pass answers
-    # a bow back at the average delay it saw (umf.warm_start.timed_proposal); 0: off
+    # > 0: where the reactions of the prompt's nearest caption waited a median of at least
+    # this many frames after their person 1 (the bank's lags), a real answer retrieved among
+    # them is moved in time to wait as long after the generated person 1, and replaces the
+    # first pass whether it glides or not: the first pass answers a bow back at the average
+    # delay it saw (umf.warm_start.answers, timed_proposal); 0: off
     warm_timing: float = 0.0
     # > 0: a person 2..N with an own prompt is sampled again from this time on the path
     # towards the P-Flow's single-person motion for that prompt alone (whatever

@@ -340,12 +340,21 @@ def shift_in_time(features: Tensor, frames: int) -> Tensor:
     velocities zero there. A person who waits before acting (an answer to a bow)."""
     n = features.shape[0]
     frames = max(-(n - 1), min(n - 1, int(frames)))
-    if frames == 0:
-        return features.clone()
-    still = (features[:1] if frames > 0 else features[-1:]).clone()
-    still[:, VEL] = 0.0
-    held = still.expand(abs(frames), -1)
-    return torch.cat([held, features[:-frames]] if frames > 0 else [features[-frames:], held])
+    if frames < 0:
+        return hold_to_length(features[-frames:], n)
+    first = features[:1].clone()
+    first[:, VEL] = 0.0  # the held pose does not move until the motion begins
+    return torch.cat([first.expand(frames, -1), features[: n - frames]])
+
+
+def hold_to_length(features: Tensor, frames: int) -> Tensor:
+    """``features`` (T, 262) cut to ``frames``, or carried on to it by holding the last pose
+    still (velocities zero from the last frame on: nothing moves after it)."""
+    if features.shape[0] >= frames:
+        return features[:frames].clone()
+    last = features[-1:].clone()
+    last[:, VEL] = 0.0
+    return torch.cat([features[:-1], last.expand(frames - features.shape[0] + 1, -1)])
 
 
 def leader_frame(features: Tensor) -> RigidTransform:

@@ -55,6 +55,7 @@ from umf.models.denoiser import FROM_CONFIG
 from umf.reaction_bank import REACTIONS
 from umf.representation import (
     features_to_joints,
+    hold_to_length,
     leader_frame,
     shift_in_time,
     transform_features,
@@ -116,15 +117,17 @@ def proposal(
     guidance: float | None,
     own: dict[str, Any],
     mirror: Any = None,
-) -> tuple[Tensor, int, Tensor, Tensor | None]:
+    timing: bool = True,
+) -> tuple[Tensor, int, Tensor, tuple[Tensor, list[int]] | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
     took, (B,) whether it fits the row (a retrieved one at the first pass's pace, with
     ``sflow.warm_pace``; module notes) and, with ``sflow.warm_timing`` and a bank that
-    stores waits, (B,) how many frames after its own person 1's each answer started (0 for
-    a row that does not answer; :func:`answers`), else None.
+    stores waits, the timing :func:`answers` gives: (B,) how many frames after its own
+    person 1's each answer started (0 for a row that does not answer) and the stored length
+    of each row's reaction; else None.
     ``mirror``: the prompts' mirror images (:func:`mirror_text`), for retrieval on the side
-    a prompt names."""
+    a prompt names; ``timing`` False: no answer is looked for (a re-rolled person 1)."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -141,17 +144,18 @@ def proposal(
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
                                       side)  # fmt: skip
-        z, lag = bank.latents[length].to(first)[idx], None
-        if bank.lags and cfg.warm_timing > 0:
-            z, lag = answers(bank, first, frames, z, cfg, generator,
-                             pipe.sflow.latent_norm.normalize, prompt)  # fmt: skip
-        return z, 0, fits, lag
+        z, waits = bank.latents[length].to(first)[idx], None
+        if timing and bank.lags and cfg.warm_timing > 0:
+            z, lag, stored = answers(bank, first, frames, z, cfg, generator,
+                                     pipe.sflow.latent_norm.normalize, prompt)  # fmt: skip
+            waits = (lag, stored)
+        return z, 0, fits, waits
     z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
     return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device), None
 
 
 def answers(bank: Any, first: Tensor, frames: int, z: Tensor, cfg: Any, generator: Any,
-            scale: Any, prompt: Tensor) -> tuple[Tensor, Tensor]:  # fmt: skip
+            scale: Any, prompt: Tensor) -> tuple[Tensor, Tensor, list[int]]:  # fmt: skip
     """The retrieved reactions ``z`` (B, p, r) with their waits (B,), for a warm start that
     retimes answers (``sflow.warm_timing`` w > 0). A row answers when the reactions of its
     prompt's nearest caption waited a median of at least w frames
@@ -160,19 +164,22 @@ def answers(bank: Any, first: Tensor, frames: int, z: Tensor, cfg: Any, generato
     spar asks the bank at 300 frames, which only carried-on walks, runs and real takes
     fill, and finds its answers at 285). Its reaction is then retrieved among that
     caption's (nearest the first pass, as always) with its own wait; every other row keeps
-    ``z`` and waits 0."""
+    ``z`` and waits 0. Also the stored length each row's reaction is of, to decode it at.
+    Answers are gestures in place: neither ``sflow.warm_pace`` nor ``warm_side`` narrows
+    them."""
     z, waits = z.clone(), torch.zeros(len(z), device=z.device)
     where = bank.caption_length(frames, prompt)
+    stored = [bank.bucket(frames)] * len(z)
     for i, length in enumerate(where):
         found = bank.caption_waits(length, prompt[i : i + 1])
-        if found is None or float(found[0][0]) < cfg.warm_timing:
+        if found is None or not float(found[0][0]) >= cfg.warm_timing:  # NaN: no caption
             continue
         gen = generator[i] if isinstance(generator, list | tuple) else generator
         _, idx, _ = bank.pick(first[i : i + 1], length, cfg.warm_neighbours, gen, scale,
                               prompt[i : i + 1], int(found[1][0]))  # fmt: skip
         z[i] = bank.latents[length].to(z)[idx[0]]
-        waits[i] = bank.lag(length, idx)[0]
-    return z, waits
+        waits[i], stored[i] = bank.lag(length, idx)[0], length
+    return z, waits, stored
 
 
 def pflow_proposal(
@@ -220,13 +227,19 @@ def onsets(features: Tensor) -> list[int]:
     return [action_onset(j, smooth=ONSET_SMOOTHING) for j in joints]
 
 
+# frames (0.5 s) an answer keeps before the scene ends, however long its real one waited
+ANSWER_TAIL = 15
+
+
 def retime(reaction: Tensor, leader: Tensor, lag: Tensor, passes: int = 2) -> Tensor:
     """Each row of ``reaction`` (B, T, 262) moved in time
     (:func:`umf.representation.shift_in_time`) so that its action starts ``lag`` (B,) frames
-    after that of the same row of ``leader`` (B, T, 262), as the checks read onsets. The
-    reading moves a little with the frames held and cut, so the shift is corrected on the
-    moved motion (``passes`` readings in all)."""
-    want = [o + round(float(x)) for o, x in zip(onsets(leader), lag, strict=True)]
+    after that of the same row of ``leader`` (B, T, 262), as the checks read onsets, but at
+    the latest ``ANSWER_TAIL`` frames before the end (a late leader must not push the answer
+    out of the scene). The reading moves a little with the frames held and cut, so the
+    shift is corrected on the moved motion (``passes`` readings in all)."""
+    last = reaction.shape[1] - ANSWER_TAIL
+    want = [min(o + round(float(x)), last) for o, x in zip(onsets(leader), lag, strict=True)]
     shift = [0] * reaction.shape[0]
     out = reaction
     for _ in range(passes):
@@ -235,25 +248,30 @@ def retime(reaction: Tensor, leader: Tensor, lag: Tensor, passes: int = 2) -> Te
     return out
 
 
-def timed_proposal(pipe: Any, guess: Tensor, prev: Tensor, lag: Tensor | None,
-                   frames: int) -> tuple[Tensor, Tensor]:  # fmt: skip
-    """With ``sflow.warm_timing`` > 0, the retrieved reactions ``guess`` (B, p, r) whose
-    action started at least that many frames after their own person 1's (``lag`` (B,), from
-    the bank) moved in time to start as long after the generated person 1 (``prev[:, 0]``),
-    re-encoded; the others as they were. Also (B,) which rows were moved: answers that wait
-    (a bow back, a response to a call) the S-Flow's first pass gives at the average delay it
-    saw, between the answer and a greeting exchanged together (module notes)."""
+def timed_proposal(pipe: Any, guess: Tensor, prev: Tensor,
+                   timing: tuple[Tensor, list[int]] | None, frames: int
+                   ) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """With ``sflow.warm_timing`` w > 0, the rows of ``guess`` (B, p, r) that :func:`answers`
+    found an answer for (a wait of at least w frames in ``timing``) decoded at the length
+    they were stored at, carried on or cut to ``frames``
+    (:func:`umf.representation.hold_to_length`), moved in time (:func:`retime`) to start as
+    long after the generated person 1 (``prev[:, 0]``) as they did after their own, and
+    re-encoded; the others as they were. Also (B,) which rows were moved: the second pass
+    from them replaces the first pass whether it glides or not. The S-Flow's first pass
+    answers a bow at the average delay it saw (module notes)."""
     answer = torch.zeros(guess.shape[0], dtype=torch.bool, device=guess.device)
-    if pipe.config.sflow.warm_timing <= 0 or lag is None:
+    if pipe.config.sflow.warm_timing <= 0 or timing is None:
         return guess, answer
+    lag, stored = timing
     answer = lag >= pipe.config.sflow.warm_timing
     if not answer.any():
         return guess, answer
     rows = answer.nonzero().flatten()
     leader = pipe.decode(prev[rows, 0], frames)  # person 1 as the pipeline decodes them
-    moved = retime(pipe.decode(guess[rows], frames, reaction=True), leader, lag[rows])
+    own = torch.stack([hold_to_length(pipe.decode(guess[i : i + 1], stored[i], reaction=True)[0],
+                                      frames) for i in rows.tolist()])  # fmt: skip
     out = guess.clone()
-    out[rows] = pipe._encode(moved).to(out)
+    out[rows] = pipe._encode(retime(own, leader, lag[rows])).to(out)
     return out, answer
 
 
@@ -278,13 +296,16 @@ def sample_added(
     own: dict[str, Any],
     pflow_guidance: float | None,
     mirror: Any = None,
+    answers_first: bool = True,
 ) -> tuple[Tensor, int]:
     """The next person's latent (B, p, r) and the NFE, as the pipeline and re-rolls sample
     people 2..N: the S-Flow's pass and, with ``sflow.warm_start``, the pass again from its
-    proposal for the rows :func:`warm_rows` takes (it runs for every row, so a row's draws
-    never depend on its batch). ``own``: the person's own prompt
-    (:func:`umf.person_prompts.person_text`); ``pflow_guidance``: the caller's guidance for
-    a P-Flow proposal (None: its config's); ``mirror``: :func:`mirror_text` of the prompts."""
+    proposal for the rows :func:`warm_rows` takes and the answers :func:`timed_proposal`
+    retimed (it runs for every row, so a row's draws never depend on its batch). ``own``:
+    the person's own prompt (:func:`umf.person_prompts.person_text`); ``pflow_guidance``:
+    the caller's guidance for a P-Flow proposal (None: its config's); ``mirror``:
+    :func:`mirror_text` of the prompts; ``answers_first``: ``prev[:, 0]`` is person 1, whom
+    an answer waits for (False for a re-rolled person 1: nobody to wait for)."""
     kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
     cfg = pipe.config.sflow
@@ -297,7 +318,8 @@ def sample_added(
     if cfg.warm_start:
         decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
-                                       pflow_guidance, own, mirror=mirror)  # fmt: skip
+                                       pflow_guidance, own, mirror=mirror,
+                                       timing=answers_first)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n

@@ -106,7 +106,7 @@ def answer_waits(ds: SceneDataset, index: int) -> list[int]:
     people = item.num_people if kind == "clip" else len(item["people"])
     answering = set()
     if kind == "scene":
-        answering = {c["b"] for c in item["constraints"]
+        answering = {c.get("b", 1) for c in item["constraints"]
                      if c["type"] == "starts_after" and c.get("a", 0) == 0}  # fmt: skip
     if not answering:
         return [0] * (people - 1)
