@@ -20,10 +20,18 @@ S-Flow learns latents of the VAE, so a delay the VAE does not keep, no flow can 
    and reconstruction: the first frame it is 10 cm above where it started (median over
    clips). No reading of motion energy, so no shimmer: the wait survives the round trip.
 
+4. ``readings`` (``--readings``): the readings of an onset the checks could use, scored as
+   ``ONSET_SMOOTHING`` was chosen: averages over 1, 9, 15, 21 frames and "the pose has moved
+   a tenth / a fifth of the way to its furthest from its first frame" (on raw positions and
+   on 9-frame averages). For each: the share of ``starts_after`` checks passed by the real
+   scenes and by their round trips (test, val, the first 100 train scenes with the check),
+   and over held clips of every label of the test and val splits (shifts 0-40) the median
+   and 90th-percentile gap between the onset of input and reconstruction.
+
 Decoded motion shimmers a few mm per joint per frame; read frame to frame, that shimmer
 over a still second outweighs a bow, and every reconstruction "starts" 12-16 frames in.
 
-    python research/vae_timing.py [MODEL_DIR] [--corpus CORPUS] [--split test]
+    python research/vae_timing.py [MODEL_DIR] [--corpus CORPUS] [--split test] [--readings]
 """
 
 from __future__ import annotations
@@ -34,7 +42,7 @@ import numpy as np
 import torch
 
 from umf.data.corpus import Corpus
-from umf.data.relations import ONSET_SMOOTHING, action_onset, check
+from umf.data.relations import ONSET_SMOOTHING, action_onset, check, moving_average
 from umf.pipeline import UMFPipeline, default_model_dir
 from umf.representation import canonicalize_features, features_to_joints, shift_in_time
 
@@ -127,6 +135,69 @@ def scene_table(pipe: UMFPipeline, corpus: Corpus, split: str) -> None:
               f"{np.median([x[3] for x in rows]):.0f} frames")  # fmt: skip
 
 
+def moved_onset(joints: np.ndarray, share: float, smooth: int = 1) -> int:
+    """The first frame the pose (relative to the pelvis) is ``share`` of the way to its
+    furthest from the first frame (mean over joints)."""
+    local = moving_average(joints - joints[:, :1], smooth)
+    away = np.linalg.norm(local - local[:1], axis=-1).mean(-1)
+    return 0 if away.max() <= 1e-8 else int(np.argmax(away >= share * away.max()))
+
+
+READINGS = {
+    "frame to frame": lambda j: action_onset(j),
+    "averaged over 9": lambda j: action_onset(j, smooth=9),
+    "averaged over 15": lambda j: action_onset(j, smooth=15),
+    "averaged over 21": lambda j: action_onset(j, smooth=21),
+    "a tenth of the way": lambda j: moved_onset(j, 0.1),
+    "a fifth of the way": lambda j: moved_onset(j, 0.2),
+    "a tenth, averaged over 9": lambda j: moved_onset(j, 0.1, 9),
+    "a fifth, averaged over 9": lambda j: moved_onset(j, 0.2, 9),
+}
+
+
+def readings_table(pipe: UMFPipeline, corpus: Corpus, frames: int, clips: int) -> None:
+    print("4. readings of an onset: starts_after passed, real / round trip, per split; "
+          "held clips: |onset(input) - onset(reconstruction)| median / 90th pct")  # fmt: skip
+    passed = {name: {} for name in READINGS}
+    for split, most in (("test", None), ("val", None), ("train", 100)):
+        recipes = [r for r in corpus.scenes[split]
+                   if any(c["type"] == "starts_after" for c in r["constraints"])]  # fmt: skip
+        recipes = recipes[:most]
+        got = {name: ([], []) for name in READINGS}
+        for r in recipes:
+            f = torch.from_numpy(corpus.scene_features(r)).float()
+            back = torch.cat([round_trip(pipe, f[:1], reaction=False),
+                              round_trip(pipe, f[1:], reaction=True)])  # fmt: skip
+            scenes = [features_to_joints(x).numpy() for x in (f, back)]
+            for c in (c for c in r["constraints"] if c["type"] == "starts_after"):
+                for name, read in READINGS.items():
+                    for i, j in enumerate(scenes):
+                        got[name][i].append(read(j[c["b"]]) - read(j[c["a"]]) >= c["min_frames"])
+        for name in READINGS:
+            passed[name][split] = (np.mean(got[name][0]), np.mean(got[name][1]), len(recipes))
+    gaps = {name: [] for name in READINGS}
+    for label in sorted({c.meta.get("content") for c in corpus.clips if c.num_people == 1}):
+        chosen = [c for c in corpus.split_clips("test") + corpus.split_clips("val")
+                  if c.num_people == 1 and c.meta.get("content") == label
+                  and c.num_frames > frames + 1][:clips]  # fmt: skip
+        if not chosen:
+            continue
+        base = torch.stack([canonicalize_features(torch.from_numpy(corpus.clip_features(c))[0]
+                                                  .float()[:frames]) for c in chosen])  # fmt: skip
+        for s in SHIFTS:
+            held = torch.stack([shift_in_time(f, s) for f in base])
+            pairs = zip(*(features_to_joints(x).numpy()
+                          for x in (held, round_trip(pipe, held, True))), strict=True)  # fmt: skip
+            for a, b in pairs:
+                for name, read in READINGS.items():
+                    gaps[name].append(abs(read(a) - read(b)))
+    for name in READINGS:
+        cells = " | ".join(f"{split} ({n}) {real:.2f} / {back:.2f}"
+                           for split, (real, back, n) in passed[name].items())  # fmt: skip
+        g = gaps[name]
+        print(f"  {name:26s} {cells} | held {np.median(g):.0f} / {np.percentile(g, 90):.0f}")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", nargs="?", default=None)
@@ -134,6 +205,7 @@ def main() -> None:
     ap.add_argument("--split", default="test")
     ap.add_argument("--frames", type=int, default=120)
     ap.add_argument("--clips", type=int, default=8)
+    ap.add_argument("--readings", action="store_true", help="also compare onset readings (4.)")
     args = ap.parse_args()
     torch.set_grad_enabled(False)
     pipe = UMFPipeline.from_pretrained(args.model or default_model_dir())
@@ -142,6 +214,8 @@ def main() -> None:
     shift_table(pipe, corpus, args.split, args.frames, args.clips)
     scene_table(pipe, corpus, args.split)
     wrist_table(pipe, corpus, args.split, args.frames, args.clips)
+    if args.readings:
+        readings_table(pipe, corpus, args.frames, 6)
 
 
 if __name__ == "__main__":

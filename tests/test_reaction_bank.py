@@ -21,6 +21,13 @@ pytestmark = pytest.mark.usefixtures("one_thread")
 P, R = 4, 8
 
 
+def nearest(bank: ReactionBank, query: torch.Tensor, frames: int, neighbours: int, *args,
+            **kwargs) -> tuple[torch.Tensor, torch.Tensor]:  # fmt: skip
+    """:meth:`ReactionBank.pick`'s reactions (B, p, r) and whether each row had one at pace."""
+    length, idx, at_pace = bank.pick(query, frames, neighbours, *args, **kwargs)
+    return bank.latents[length][idx], at_pace
+
+
 def _bank(seed: int = 0) -> ReactionBank:
     g = torch.Generator().manual_seed(seed)
     return ReactionBank({30: torch.randn(50, P, R, generator=g),
@@ -50,24 +57,24 @@ def test_nearest_takes_the_stored_length_nearest_and_one_of_the_k_nearest():
     query = store[[3, 7, 11]] + 0.01 * torch.randn(
         3, P, R, generator=torch.Generator().manual_seed(1)
     )
-    assert torch.equal(bank.nearest(query, 33, 1)[0], store[[3, 7, 11]])
+    assert torch.equal(nearest(bank, query, 33, 1)[0], store[[3, 7, 11]])
     d = torch.cdist(query.flatten(1), store.flatten(1))
     near = d.topk(5, largest=False).indices
     gens = [torch.Generator().manual_seed(s) for s in range(3)]
-    got = bank.nearest(query, 33, 5, gens)[0]
+    got = nearest(bank, query, 33, 5, gens)[0]
     for row, z in enumerate(got):
         i = int((store == z).all(dim=(1, 2)).nonzero())
         assert i in near[row].tolist()
-    again = bank.nearest(query, 33, 5, [torch.Generator().manual_seed(s) for s in range(3)])[0]
+    again = nearest(bank, query, 33, 5, [torch.Generator().manual_seed(s) for s in range(3)])[0]
     assert torch.equal(got, again)  # seeded, row by row
-    picks = {int((store == bank.nearest(query[:1], 33, 5, torch.Generator().manual_seed(s))[0][0])
+    picks = {int((store == nearest(bank, query[:1], 33, 5, torch.Generator().manual_seed(s))[0][0])
                  .all(dim=(1, 2)).nonzero()) for s in range(40)}  # fmt: skip
     assert picks == set(near[0].tolist())  # every one of the 5 is drawn
     # the distance is measured after ``scale``: one that weighs channel 0 a thousandfold
     weigh = torch.ones(R)
     weigh[0] = 1000.0
     far = torch.randn(3, P, R, generator=torch.Generator().manual_seed(9))
-    scaled = bank.nearest(far, 33, 1, scale=lambda z: z * weigh)[0]
+    scaled = nearest(bank, far, 33, 1, scale=lambda z: z * weigh)[0]
     want = torch.cdist((far * weigh).flatten(1), (store * weigh).flatten(1)).argmin(dim=1)
     plain = torch.cdist(far.flatten(1), store.flatten(1)).argmin(dim=1)
     assert torch.equal(scaled, store[want]) and not torch.equal(want, plain)
@@ -176,19 +183,19 @@ def test_a_shortlist_by_caption_restricts_the_candidates(tmp_path):
     texts = torch.nn.functional.normalize(torch.randn(30, 16, generator=g), dim=-1)
     bank = ReactionBank({30: latents}, {30: texts})
     query = latents[[5]] + 0.01
-    assert torch.equal(bank.nearest(query, 30, 1)[0], latents[[5]])
+    assert torch.equal(nearest(bank, query, 30, 1)[0], latents[[5]])
     prompt = torch.nn.functional.normalize(torch.randn(1, 16, generator=g), dim=-1)
     short = (prompt @ texts.T).topk(2).indices[0]  # the two captions nearest the prompt
     assert 5 not in short.tolist()
-    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=2)[0]
+    got = nearest(bank, query, 30, 1, prompt=prompt, shortlist=2)[0]
     d = torch.cdist(query.flatten(1), latents[short].flatten(1))
     assert torch.equal(got, latents[short][d.argmin(dim=1)])
-    picks = {int((latents == bank.nearest(query, 30, 4, torch.Generator().manual_seed(s),
+    picks = {int((latents == nearest(bank, query, 30, 4, torch.Generator().manual_seed(s),
                                           prompt=prompt, shortlist=2)[0][0]).all(dim=(1, 2))
                  .nonzero()) for s in range(20)}  # fmt: skip
     assert picks == set(short.tolist())  # 4 neighbours asked, 2 on the shortlist
     plain = ReactionBank({30: latents})  # no captions: the shortlist is ignored
-    assert torch.equal(plain.nearest(query, 30, 1, prompt=prompt, shortlist=2)[0], latents[[5]])
+    assert torch.equal(nearest(plain, query, 30, 1, prompt=prompt, shortlist=2)[0], latents[[5]])
     bank.save(tmp_path)
     back = ReactionBank.load(tmp_path, (P, R))
     torch.testing.assert_close(back.texts[30], texts, atol=2e-3, rtol=1e-3)
@@ -209,21 +216,21 @@ def test_a_pace_restricts_the_candidates_to_reactions_travelling_as_the_first_pa
     velocities = torch.stack([torch.zeros(40), sign * speed], dim=1)
     bank = ReactionBank({30: latents}, velocities={30: velocities})
     query = latents[[3, 3]] + 0.01  # nearest in latent space: reaction 3 (0.15 m/s back)
-    assert torch.equal(bank.nearest(query, 30, 1)[0], latents[[3, 3]])
+    assert torch.equal(nearest(bank, query, 30, 1)[0], latents[[3, 3]])
     want = torch.tensor([[0.0, 1.2], [0.0, -1.2]])  # 1.2 m/s forward, 1.2 m/s back
-    got = bank.nearest(query, 30, 1, velocity=want, pace=0.2)[0]
+    got = nearest(bank, query, 30, 1, velocity=want, pace=0.2)[0]
     for row in range(2):
         ok = ((velocities - want[row]).norm(dim=-1) <= 0.2 * 1.2 + 1e-6).nonzero()[:, 0]
         assert (velocities[ok, 1] * want[row, 1] > 0).all() and len(ok) >= 3
         d = torch.cdist(query[row : row + 1].flatten(1), latents[ok].flatten(1))
         assert torch.equal(got[row], latents[ok][d.argmin()])
     # nothing within 1 % of 3 m/s forward: the 3 fastest forward ones compete
-    picks = {int((latents == bank.nearest(query[:1], 30, 3, torch.Generator().manual_seed(s),
+    picks = {int((latents == nearest(bank, query[:1], 30, 3, torch.Generator().manual_seed(s),
                                           velocity=torch.tensor([[0.0, 3.0]]), pace=0.01)[0][0])
                  .all(dim=(1, 2)).nonzero()) for s in range(30)}  # fmt: skip
     assert picks == {34, 36, 38}
     plain = ReactionBank({30: latents})  # no velocities: the pace is ignored
-    assert torch.equal(plain.nearest(query, 30, 1, velocity=want, pace=0.2)[0], latents[[3, 3]])
+    assert torch.equal(nearest(plain, query, 30, 1, velocity=want, pace=0.2)[0], latents[[3, 3]])
     bank.save(tmp_path)
     torch.testing.assert_close(ReactionBank.load(tmp_path).velocities[30], velocities,
                                atol=2e-3, rtol=1e-3)  # fmt: skip
@@ -253,7 +260,7 @@ def test_the_bank_stores_each_reactions_pelvis_velocity(corpus, model):
 def at_pace(bank, velocity, frames, pace, prompt=None, shortlist=0):
     """Whether :meth:`ReactionBank.nearest` found each row a reaction at ``pace``."""
     query = torch.zeros(len(velocity), *next(iter(bank.latents.values())).shape[1:])
-    return bank.nearest(query, frames, 1, prompt=prompt, shortlist=shortlist,
+    return nearest(bank, query, frames, 1, prompt=prompt, shortlist=shortlist,
                         velocity=velocity, pace=pace)[1]  # fmt: skip
 
 
@@ -343,8 +350,8 @@ def test_the_pace_looks_only_inside_the_caption_shortlist():
     assert at_pace(bank, fast, 30, 0.15, prompt, shortlist=3).tolist() == [False]
     assert at_pace(bank, torch.tensor([[0.0, 1.5]]), 30, 0.15, prompt, 3).tolist() == [True]
     query = latents[[3]] + 0.01
-    assert torch.equal(bank.nearest(query, 30, 1, velocity=fast, pace=0.15)[0], latents[[3]])
-    got = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3, velocity=fast, pace=0.15)[0]
+    assert torch.equal(nearest(bank, query, 30, 1, velocity=fast, pace=0.15)[0], latents[[3]])
+    got = nearest(bank, query, 30, 1, prompt=prompt, shortlist=3, velocity=fast, pace=0.15)[0]
     assert torch.equal(got, latents[[2]])  # the shortlisted reaction nearest in velocity
     # a slow row: the tolerance is a share of at least PACE_FLOOR m/s, not of its own speed
     from umf.reaction_bank import PACE_FLOOR
@@ -386,14 +393,14 @@ def test_a_prompt_naming_a_side_retrieves_reactions_on_that_side():
     bank = ReactionBank({30: latents}, {30: captions})
     query = latents[[1]] + 0.01  # nearest in latent space: the reaction on the right
     prompt, mirror = embed(encoder, [left]), embed(encoder, [right])
-    near = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3)[0]
+    near = nearest(bank, query, 30, 1, prompt=prompt, shortlist=3)[0]
     assert torch.equal(near, latents[[1]])
-    sided = bank.nearest(query, 30, 1, prompt=prompt, shortlist=3, mirror=mirror)[0]
+    sided = nearest(bank, query, 30, 1, prompt=prompt, shortlist=3, mirror=mirror)[0]
     kept = [i for i in range(3) if float(captions[i] @ prompt[0]) >= float(captions[i] @ mirror[0])]
     assert 1 not in kept and 0 in kept
     d = torch.cdist(query.flatten(1), latents[kept].flatten(1))
     assert torch.equal(sided, latents[kept][d.argmin(dim=1)])
-    assert torch.equal(bank.nearest(query, 30, 1, prompt=embed(encoder, [plain]), shortlist=3,
+    assert torch.equal(nearest(bank, query, 30, 1, prompt=embed(encoder, [plain]), shortlist=3,
                                     mirror=embed(encoder, [plain]))[0], latents[[1]])  # fmt: skip
 
 
@@ -417,7 +424,7 @@ def test_a_rows_pick_does_not_depend_on_the_others_in_its_batch():
         mirror = torch.cat([prompt[:1], partner_mirror])
         for seed in range(6):
             gens = [torch.Generator().manual_seed(seed), torch.Generator().manual_seed(99)]
-            z, _ = bank.nearest(query, 30, 4, gens, prompt=prompt, shortlist=40, mirror=mirror)
+            z, _ = nearest(bank, query, 30, 4, gens, prompt=prompt, shortlist=40, mirror=mirror)
             picks.append((partner_mirror is far, seed, z[0]))
     for seed in range(6):
         a, b = (z for far_, s, z in picks if s == seed)
@@ -433,24 +440,27 @@ def test_the_bank_stores_how_long_each_answer_waited_in_its_whole_scene(corpus, 
 
     from umf.data.corpus import Corpus
     from umf.train.datasets import SceneDataset
-    from umf.train.reactions import scene_onsets
+    from umf.warm_start import onsets
 
     pipe = UMFPipeline.from_pretrained(model, text_encoder=FakeText())
     bank = build_reaction_bank(corpus, pipe, lengths=[30], per_length=10_000, progress=False,
                                log=lambda m: None)  # fmt: skip
     ds = SceneDataset(Corpus.load(corpus), "train", pipe.normalizer, min_frames=30,
                       max_frames=30, mirror=True, seed=0)  # fmt: skip
-    want, answers = [], 0
+    want, needed = [], []
     for i in range(len(ds)):
         if ds[i]["features"].shape[1] != 30:
             continue
         _, record, _ = ds.items[i]
-        onsets = scene_onsets(ds.whole(i))
-        waits = {c["b"] for c in record["constraints"] if c["type"] == "starts_after"}
-        answers += len(waits)
-        want += [o - onsets[0] if k in waits else 0 for k, o in enumerate(onsets[1:], 1)]
+        start = onsets(ds.whole(i))
+        waits = {c["b"]: c["min_frames"] for c in record["constraints"]
+                 if c["type"] == "starts_after"}  # fmt: skip
+        want += [o - start[0] if k in waits else 0 for k, o in enumerate(start[1:], 1)]
+        needed += [(len(want) - len(start) + k, m) for k, m in waits.items()]
     assert bank.lags[30].tolist() == want
-    assert answers and any(want)  # the fixture's composed scenes hold answers that wait
+    assert needed  # the fixture's composed scenes hold answers
+    # each answer waited at least what its composer's record asks (its starts_after check)
+    assert all(bank.lags[30][row] >= m >= 5 for row, m in needed), needed
     path = bank.save(tmp_path)
     assert torch.equal(ReactionBank.load(tmp_path).lags[30], bank.lags[30])
     raw = load_file(str(path))
@@ -480,7 +490,7 @@ def test_caption_waits_and_where_the_bank_keeps_a_prompts_captions():
     assert ReactionBank({30: torch.zeros(2, P, R)}).caption_waits(30, prompts) is None
     length, idx, _ = bank.pick(bank.latents[285][[2, 4]] + 0.01, 280, 1)
     assert length == 285 and idx.tolist() == [2, 4]
-    assert bank.lag(280, idx).tolist() == [26.0, 0.0]
+    assert bank.lag(length, idx).tolist() == [26.0, 0.0]
 
 
 def test_an_answer_is_retrieved_where_its_caption_is_stored_with_its_wait():

@@ -170,16 +170,9 @@ class ReactionBank:
         chosen = torch.zeros(sims.shape, dtype=torch.bool, device=sims.device)
         return chosen.scatter(1, keep, True) & torch.isfinite(sims)
 
-    def nearest(self, query: Tensor, frames: int, neighbours: int, *args, **kwargs
-                ) -> tuple[Tensor, Tensor]:  # fmt: skip
-        """:meth:`pick`'s reactions (B, p, r) and (B,) whether each row had one at its pace."""
-        length, idx, at_pace = self.pick(query, frames, neighbours, *args, **kwargs)
-        return self.latents[length].to(query)[idx], at_pace
-
-    def lag(self, frames: int, idx: Tensor) -> Tensor | None:
-        """(B,) the lags (frames) of the reactions ``idx`` of the length :meth:`pick` took
-        for ``frames``; None for a bank without lags (written before them)."""
-        length = self.bucket(frames)
+    def lag(self, length: int, idx: Tensor) -> Tensor | None:
+        """(B,) the lags (frames) of the reactions ``idx`` stored at ``length`` (as
+        :meth:`pick` returns them); None for a bank without lags (written before them)."""
         return self.lags[length][idx.cpu()] if length in self.lags else None
 
     def caption_waits(self, frames: int, prompt: Tensor) -> tuple[Tensor, Tensor] | None:

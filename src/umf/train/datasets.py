@@ -506,10 +506,7 @@ class SceneDataset(_EpochDataset):
         after it (an answer's delay, :mod:`umf.train.reactions`)."""
         kind, item, tf = self.items[index]
         total = (item.num_frames if kind == "clip" else item["num_frames"]) - 1
-        if kind == "clip":
-            return _clip_crop(item, tf, range(item.num_people), 0, total)
-        recipe = crop_recipe(item, self.corpus.actors(), 0, total + 1)
-        return torch.from_numpy(self.corpus.scene_features(recipe))
+        return self._crop(kind, item, tf, 0, total)
 
     def __getitem__(self, index: int) -> dict[str, Any]:
         kind, item, tf = self.items[index]

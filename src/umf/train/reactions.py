@@ -12,12 +12,10 @@ from tqdm import tqdm
 
 from umf.coverage import embed
 from umf.data.corpus import Corpus
-from umf.data.relations import ONSET_SMOOTHING, action_onset
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
-from umf.representation import features_to_joints
 from umf.train.datasets import SceneDataset
-from umf.warm_start import floor_velocity
+from umf.warm_start import floor_velocity, onsets
 
 STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
 
@@ -110,15 +108,8 @@ def answer_waits(ds: SceneDataset, index: int) -> list[int]:
                      if c["type"] == "starts_after" and c.get("a", 0) == 0}  # fmt: skip
     if not answering:
         return [0] * (people - 1)
-    onsets = scene_onsets(ds.whole(index))
-    return [onsets[k] - onsets[0] if k in answering else 0 for k in range(1, people)]
-
-
-def scene_onsets(features: torch.Tensor) -> list[int]:
-    """Each person's action onset (frame, :func:`umf.data.relations.action_onset`) in a
-    scene's features (N, T, 262), as the relation checks read it."""
-    return [action_onset(j, smooth=ONSET_SMOOTHING)
-            for j in features_to_joints(features.float()).numpy()]  # fmt: skip
+    start = onsets(ds.whole(index))
+    return [start[k] - start[0] if k in answering else 0 for k in range(1, people)]
 
 
 def write_reactions(
