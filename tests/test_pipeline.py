@@ -582,3 +582,34 @@ def test_reencoded_context_is_what_sflow_trained_on(trained, monkeypatch):
     assert torch.allclose(contexts[0][:, 0], want1, atol=1e-4)
     assert torch.allclose(contexts[1][:, 0], want1, atol=1e-4)
     assert torch.allclose(contexts[1][:, 1], want2, atol=1e-4)
+
+
+def test_a_generated_person_1_starts_over_the_origin_with_pin_leader_start(trained):
+    """vae.pin_leader_start: person 1's fused path moves (rigidly) to start where every
+    training crop starts them; people 2..N stay where they were decoded. Off: the fused
+    path's start is wherever the positions sit on average."""
+    _, model, _ = trained
+
+    def scene(pin: bool):
+        pipe = UMFPipeline.from_pretrained(model)
+        pipe.config.vae.pin_leader_start = pin
+        pipe.config.vae.root_fusion = 1e-4  # trust the velocities: the start drifts
+        return pipe("two people walk", num_people=2, seconds=1.0, seed=0, fit=False,
+                    separate=False)[0].joints  # fmt: skip
+
+    off, on = scene(False), scene(True)
+    assert np.linalg.norm(off[0, 0, 0, [0, 2]]) > 0.01  # the test means something
+    assert np.allclose(on[0, 0, 0, [0, 2]], 0.0, atol=1e-5)
+    moved = off[0] - on[0]
+    assert np.allclose(moved, moved[:1, :1], atol=1e-5) and np.allclose(moved[..., 1], 0.0)
+    assert np.array_equal(on[1], off[1])
+
+
+def test_pin_leader_start_leaves_the_users_actor_alone(trained, bandai_clips):
+    _, model, _ = trained
+    pipe = UMFPipeline.from_pretrained(model)
+    pipe.config.vae.pin_leader_start = True
+    actor = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001").joints[0][:61]
+    s = pipe("two people bow to each other", num_people=2, actor=actor, seed=0, fit=False,
+             separate=False)[0]  # fmt: skip
+    assert np.allclose(s.joints[0], actor[:60], atol=1e-5)

@@ -424,3 +424,18 @@ def test_hold_to_length_cuts_or_holds_the_last_pose(real_joints):
     torch.testing.assert_close(longer[: n - 1], f[:-1])
     torch.testing.assert_close(longer[n - 1 :, rep.ROT], f[-1:, rep.ROT].expand(9, -1))
     assert float(longer[n - 1 :, rep.VEL].abs().max()) == 0.0
+
+
+def test_pin_floor_start_moves_the_whole_body_to_start_over_the_origin():
+    """One floor shift per row: the first-frame pelvis over the origin (x, z), heights, the
+    body relative to its pelvis, the path's shape and every other slot unchanged."""
+    f = torch.stack([_noisy_features(9, seed=4), _noisy_features(9, seed=5)])
+    f[..., rep.POS] += torch.tensor([1.5, 0.0, -2.0]).repeat(22)  # far from the origin
+    out = rep.pin_floor_start(f)
+    j, j0 = rep.features_to_joints(out), rep.features_to_joints(f)
+    assert torch.allclose(j[:, 0, 0, [0, 2]], torch.zeros(2, 2, dtype=j.dtype), atol=1e-12)
+    shift = j0 - j
+    assert torch.allclose(shift, shift[:, :1, :1].expand_as(shift), atol=1e-12)  # rigid
+    assert torch.equal(shift[..., 1], torch.zeros_like(shift[..., 1]))  # heights kept
+    assert torch.equal(out[..., rep.VEL.start :], f[..., rep.VEL.start :])
+    assert torch.allclose(rep.pin_floor_start(out), out, atol=1e-12)  # pinned stays put

@@ -351,3 +351,66 @@ def test_warm_timing_must_not_be_negative():
     check_config_values(set_option(small_config(), "sflow.warm_timing=8"))
     with pytest.raises(UMFError, match="warm_timing"):
         check_config_values(set_option(small_config(), "sflow.warm_timing=-1"))
+
+
+def test_travels_with_needs_both_moving_the_same_way():
+    from umf.warm_start import MOVING, travels_with
+
+    first = torch.tensor([[0.0, 2.0], [0.0, 2.0], [0.0, -2.0], [0.0, MOVING / 2], [1.9, 1.9]])
+    lead = torch.tensor([[0.1, 2.5], [0.0, MOVING / 2], [0.0, 2.5], [0.0, 2.5], [0.0, 2.5]])
+    assert travels_with(first, lead, 0.8).tolist() == [True, False, False, False, False]
+    assert travels_with(first, lead, 0.7).tolist() == [True, False, False, False, True]
+
+
+def test_warm_together_retrieves_at_the_leaders_pace(models, monkeypatch):
+    """With ``sflow.warm_together`` a first pass travelling with person 1 retrieves the
+    reaction at person 1's pace, not its own, and a reaction nearer that pace than the first
+    pass fits even outside the tolerance; a row not travelling with person 1 is unchanged."""
+    import umf.warm_start
+    from umf.reaction_bank import ReactionBank
+    from umf.warm_start import proposal
+
+    pipe = models["warm"]
+    first = torch.zeros(2, *pipe.vae.latent_shape)
+    decoded = pipe.decode(first, 30, reaction=True)
+    own = torch.tensor([[0.0, 1.0], [0.0, -1.0]])  # row 1 walks the other way
+    lead = torch.tensor([[0.0, 2.5], [0.0, 2.5]])
+    monkeypatch.setattr(umf.warm_start, "floor_velocity",
+                        lambda f, fps: own if f is decoded else lead)  # fmt: skip
+    slow, fast = first[:1], first[:1] + 1.0  # the first pass's latent is nearest the slow one
+    bank = ReactionBank({30: torch.cat([slow, fast, slow])},
+                        velocities={30: torch.tensor([[0.0, 1.0], [0.0, 1.8], [0.0, -1.0]])})
+    text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
+    cfg = pipe.config.sflow
+    old = (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
+           pipe.reactions)  # fmt: skip
+    try:
+        cfg.warm_pace, cfg.warm_proposal, cfg.warm_neighbours = 0.1, "retrieved", 1
+        pipe.reactions = bank
+
+        def run(together: float):
+            cfg.warm_together = together
+            gens = [torch.Generator().manual_seed(s) for s in range(2)]
+            z, _, fits, _ = proposal(pipe, first, decoded, text, uncond, gens, None, {},
+                                     leader=decoded.flip(0))  # fmt: skip
+            return z, fits
+
+        z, fits = run(0.0)  # its own pace: the slow one
+        assert torch.equal(z[0], slow[0]) and fits.tolist() == [True, True]
+        z, fits = run(0.8)  # the leader's: the fast one, 28 % slow but nearer than 1.0
+        assert torch.equal(z[0], fast[0]) and fits.tolist() == [True, True]
+        assert torch.equal(z[1], slow[0])  # walking away: its own pace, as before
+    finally:
+        (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
+         pipe.reactions) = old  # fmt: skip
+
+
+def test_warm_together_needs_a_retrieved_proposal_at_a_pace():
+    from conftest import tiny_config
+    from umf.config import set_option
+    from umf.model_checks import check_config_values
+
+    with pytest.raises(UMFError, match="warm_together needs"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_together=0.8"))
+    with pytest.raises(UMFError, match="warm_together"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_together=1.5"))

@@ -63,6 +63,12 @@ class VAEConfig:
     # at 0.0002 the val pairs' "distance" checks fell from 90 to 80 %, at 0.001 they stay
     # at 90 %. None = root_fusion
     reaction_root_fusion: float | None = 0.001
+    # a generated person 1's fused floor path is moved to start over the origin (where
+    # every training crop starts it, representation.pin_floor_start) rather than where
+    # its decoded positions sit on average: a P-Flow runner's positions travel half as far
+    # as its velocities, the fused start lands 1-2 m behind the origin and people 2..N,
+    # placed relative to the origin, run ahead of it
+    pin_leader_start: bool = False
 
     def fusion_weights(self, reaction: bool = False) -> tuple[float, float, float | None]:
         """(position, root, height) weights of representation.fuse_positions for person 1
@@ -219,6 +225,11 @@ class SFlowConfig:
     # this fraction of the first pass's (its path keeps pace and direction where its legs
     # do not); a bank without velocities (written before them) is used without it
     warm_pace: float = 0.0
+    # > 0: where the first pass travels with person 1 (both pelvises at least
+    # umf.warm_start.MOVING m/s, their floor velocities' cosine at least this), warm_pace
+    # compares the bank with person 1's velocity instead: people walking or running together
+    # keep the leader's pace and heading, where the first pass lags and drifts outwards
+    warm_together: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
     # as near it as its mirror image (side words swapped): people on the side it names

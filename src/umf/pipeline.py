@@ -50,6 +50,7 @@ from umf.representation import (
     fuse_positions,
     joints_to_rot6d,
     leader_frame,
+    pin_floor_start,
     transform_features,
 )
 from umf.reroll import reroll_person
@@ -364,8 +365,10 @@ class UMFPipeline:
         check_finite(z, "the sampled latents (P-Flow / S-Flow output)")
         raw = self._decode_raw(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
         vae = self.config.vae  # person 1 and people 2..N fuse their floor paths differently
-        feats = torch.cat([fuse_positions(raw[:, :1], *vae.fusion_weights()),
-                           fuse_positions(raw[:, 1:], *vae.fusion_weights(reaction=True))],
+        lead = fuse_positions(raw[:, :1], *vae.fusion_weights())
+        if vae.pin_leader_start and actor is None:
+            lead = pin_floor_start(lead)
+        feats = torch.cat([lead, fuse_positions(raw[:, 1:], *vae.fusion_weights(reaction=True))],
                           dim=1)  # fmt: skip
         if placed is not None:  # people 2..N back from person 1's re-centred frame
             back = zip(feats[:, 1:], placed, strict=True)
@@ -422,7 +425,8 @@ class UMFPipeline:
         2..N (the S-Flow's), whose floor path may trust its decoded positions more
         (``vae.reaction_root_fusion``): they are placed relative to person 1."""
         raw = self._decode_raw(z, num_frames)
-        return fuse_positions(raw, *self.config.vae.fusion_weights(reaction))
+        out = fuse_positions(raw, *self.config.vae.fusion_weights(reaction))
+        return pin_floor_start(out) if self.config.vae.pin_leader_start and not reaction else out
 
     def _decode_raw(self, z: torch.Tensor, num_frames: int) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262), before the fusion."""

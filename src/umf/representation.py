@@ -249,6 +249,22 @@ def fuse_positions(features: Tensor, position_weight: float, root_weight: float 
     return torch.cat([fused.to(dtype), new_vel.to(dtype), rest], dim=-1)
 
 
+def pin_floor_start(features: Tensor) -> Tensor:
+    """Features (..., T, 262) moved on the floor (every joint, every frame, by one shift
+    per row) so that the first-frame pelvis stands over the origin: where the canonical
+    frame puts person 1 of every training crop (:func:`canonicalize_features`). The fused
+    floor path (:func:`fuse_positions` at a small root weight) follows the decoded
+    velocities and sits where the decoded positions do on average; where the two disagree
+    (a generated runner's positions travel half as far as its legs), the average leaves
+    the start a metre or more from the origin, and people placed relative to it out of
+    place. Velocities and everything else are unchanged."""
+    pos = features[..., POS].reshape(*features.shape[:-1], NUM_JOINTS, 3)
+    shift = torch.zeros_like(pos[..., :1, :1, :])
+    shift[..., [0, 2]] = pos[..., :1, :1, [0, 2]]
+    pos = pos - shift
+    return torch.cat([pos.reshape(*features.shape[:-1], 66), features[..., VEL.start :]], dim=-1)
+
+
 def features_to_local_rotations(features: Tensor) -> Tensor:
     """(..., T, 262) -> local rotation matrices (..., T, 21, 3, 3) of joints 1..21."""
     d6 = features[..., ROT].reshape(*features.shape[:-1], NUM_JOINTS - 1, 6)

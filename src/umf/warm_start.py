@@ -26,7 +26,12 @@ gesture does not glide, and a proposal from elsewhere only costs it its fit to t
 ``sflow.warm_pace`` > 0 retrieves only real reactions that travel as the first pass does
 (its decoded path keeps pace and direction where its legs do not): pelvis velocities in
 person 1's frame within that fraction of the first pass's. A person for whom the bank has
-none keeps the first pass (:func:`warm_rows`). ``sflow.warm_side`` retrieves, for a prompt
+none keeps the first pass (:func:`warm_rows`). ``sflow.warm_together`` c > 0 compares the
+bank with person 1's velocity instead, for the people whose first pass travels with person 1
+(:func:`travels_with`: a cosine of at least c): the first pass beside a runner lags and
+veers, and a reaction at its pace did too (runners side by side kept pace in 4 and 1 of 8
+seeds, two and three people; with it 7 and 6). A reaction nearer the leader's pace than the
+first pass then fits such a person even outside the tolerance. ``sflow.warm_side`` retrieves, for a prompt
 that names a side ("... the second person on the first one's left."), only reactions whose
 captions are at least as near the prompt as its mirror image: people on that side.
 
@@ -96,6 +101,16 @@ def floor_velocity(features: Tensor, fps: float) -> Tensor:
     return (pelvis[:, -1] - pelvis[:, 0]) * fps / max(pelvis.shape[1] - 1, 1)
 
 
+def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
+    """(B,) whether each first pass (floor velocity ``first``, (B, 2) m/s) travels with
+    person 1 (``leader``, (B, 2)): both at least ``MOVING``, their directions' cosine at
+    least ``cosine``. Beside a runner the first pass lags and drifts outwards
+    (results/umf-small-bandai-20261210, runner-placement.txt), and a reaction retrieved at
+    its pace keeps both; at the leader's pace it keeps up."""
+    moving = (first.norm(dim=-1) >= MOVING) & (leader.norm(dim=-1) >= MOVING)
+    return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
+
+
 def glide_score(features: Tensor, fps: float) -> Tensor:
     """(B,) the slower ankle's mean floor speed over the pelvis's for features (B, T, 262);
     0 for a row whose pelvis travels under ``MOVING``. A stride keeps one foot near rest, a
@@ -118,6 +133,7 @@ def proposal(
     own: dict[str, Any],
     mirror: Any = None,
     timing: bool = True,
+    leader: Tensor | None = None,
 ) -> tuple[Tensor, int, Tensor, tuple[Tensor, list[int]] | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
@@ -127,7 +143,9 @@ def proposal(
     person 1's each answer started (0 for a row that does not answer) and the stored length
     of each row's reaction; else None.
     ``mirror``: the prompts' mirror images (:func:`mirror_text`), for retrieval on the side
-    a prompt names; ``timing`` False: no answer is looked for (a re-rolled person 1)."""
+    a prompt names; ``timing`` False: no answer is looked for (a re-rolled person 1);
+    ``leader`` (B, T, 262): person 1 as the pipeline decodes them, whose pace the rows that
+    travel with them keep (``sflow.warm_together``)."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -138,13 +156,26 @@ def proposal(
         unit = torch.nn.functional.normalize
         prompt = unit(text.pooled.float(), dim=-1)
         side = None if mirror is None else unit(mirror.pooled.float(), dim=-1)
-        velocity = floor_velocity(decoded, pipe.config.fps) if cfg.warm_pace > 0 else None
+        fps = pipe.config.fps
+        own_pace = floor_velocity(decoded, fps) if cfg.warm_pace > 0 else None
+        together = None  # rows that keep person 1's pace rather than their own
+        velocity = own_pace
+        if own_pace is not None and leader is not None and cfg.warm_together > 0:
+            lead = floor_velocity(leader, fps)
+            together = travels_with(own_pace, lead, cfg.warm_together)
+            velocity = torch.where(together[:, None], lead, own_pace)
         bank, frames = pipe.reactions, decoded.shape[1]
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
                                       side)  # fmt: skip
         z, waits = bank.latents[length].to(first)[idx], None
+        if together is not None and length in bank.velocities:
+            # beside a leader, a reaction nearer the leader's pace than the first pass fits,
+            # within the tolerance or not: the first pass is the one that lags
+            got = bank.velocities[length].to(velocity)[idx]
+            nearer = (got - velocity).norm(dim=-1) < (own_pace - velocity).norm(dim=-1)
+            fits = fits | (together & nearer)
         if timing and bank.lags and cfg.warm_timing > 0:
             z, lag, stored = answers(bank, first, frames, z, cfg, generator,
                                      pipe.sflow.latent_norm.normalize, prompt)  # fmt: skip
@@ -317,9 +348,10 @@ def sample_added(
         return w, nfe + m + n
     if cfg.warm_start:
         decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
+        leader = pipe.decode(prev[:, 0], frames) if cfg.warm_together > 0 else None
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
-                                       timing=answers_first)  # fmt: skip
+                                       timing=answers_first, leader=leader)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
