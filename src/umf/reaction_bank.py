@@ -40,6 +40,7 @@ CAPTION = "caption_"  # ... and each reaction's row of them (N,), per length
 PACE_FLOOR = 0.5
 VELOCITY = "velocity_"
 LAG = "lag_"
+START = "start_"
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
@@ -62,6 +63,9 @@ class ReactionBank:
     # (umf.data.relations.action_onset), for an answer retimed to a generated person 1
     # (sflow.warm_timing); may be empty
     lags: dict[int, Tensor] = field(default_factory=dict)
+    # per length, each reaction's first-frame pelvis on the floor (N, 2), x and z in m in
+    # person 1's frame (+x: person 1's left), for a reaction on a given side; may be empty
+    starts: dict[int, Tensor] = field(default_factory=dict)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
@@ -75,6 +79,7 @@ class ReactionBank:
         tensors = {f"{PREFIX}{k}": v for k, v in self.latents.items()}
         tensors |= {f"{VELOCITY}{k}": v for k, v in self.velocities.items()}
         tensors |= {f"{LAG}{k}": v for k, v in self.lags.items()}  # whole frames: exact in fp16
+        tensors |= {f"{START}{k}": v for k, v in self.starts.items()}
         tensors = {k: v.to(torch.float16) for k, v in tensors.items()}
         if self.texts:
             lengths = sorted(self.texts)
@@ -115,6 +120,8 @@ class ReactionBank:
                           if k.startswith(VELOCITY)}  # fmt: skip
             lags = {int(k.removeprefix(LAG)): v.float() for k, v in raw.items()
                     if k.startswith(LAG)}  # fmt: skip
+            starts = {int(k.removeprefix(START)): v.float() for k, v in raw.items()
+                      if k.startswith(START)}  # fmt: skip
         except (OSError, ValueError, RuntimeError, IndexError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -125,18 +132,19 @@ class ReactionBank:
             z = latents.get(frames)
             if z is None or e.ndim != 2 or len(e) != len(z) or not torch.isfinite(e).all():
                 raise UMFError(f"{path}: captions of {frames} frames do not match its reactions")
-        for frames, v in velocities.items():
-            z = latents.get(frames)
-            if z is None or v.shape != (len(z), 2) or not torch.isfinite(v).all():
-                raise UMFError(f"{path}: velocities of {frames} frames do not match its "
-                               "reactions")  # fmt: skip
+        for name, table in (("velocities", velocities), ("starts", starts)):
+            for frames, v in table.items():
+                z = latents.get(frames)
+                if z is None or v.shape != (len(z), 2) or not torch.isfinite(v).all():
+                    raise UMFError(f"{path}: {name} of {frames} frames do not match its "
+                                   "reactions")  # fmt: skip
         for frames, v in lags.items():
             z = latents.get(frames)
             if z is None or v.shape != (len(z),) or not torch.isfinite(v).all():
                 raise UMFError(f"{path}: lags of {frames} frames do not match its reactions")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents, texts, velocities, lags)
+        return cls(latents, texts, velocities, lags, starts)
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""
@@ -169,6 +177,20 @@ class ReactionBank:
         keep = sims.topk(min(shortlist, sims.shape[1]), dim=1).indices
         chosen = torch.zeros(sims.shape, dtype=torch.bool, device=sims.device)
         return chosen.scatter(1, keep, True) & torch.isfinite(sims)
+
+    def _on_side(self, length: int, stand: Tensor, allowed: Tensor | None) -> Tensor | None:
+        """``allowed`` (B, N) (None: every reaction) narrowed, for the rows whose ``stand``
+        (B,) is +1 or -1, to the reactions starting on that side of person 1; a row with
+        none there keeps what it had."""
+        side = torch.sign(self.starts[length][:, 0]).to(stand)  # (N,)
+        on = (stand[:, None] == 0) | (side[None] == stand[:, None])
+        if allowed is not None:
+            on = on & allowed
+        none = ~on.any(dim=1)
+        if not none.any():
+            return on
+        rest = torch.ones_like(on) if allowed is None else allowed
+        return torch.where(none[:, None], rest, on)
 
     def lag(self, length: int, idx: Tensor) -> Tensor | None:
         """(B,) the lags (frames) of the reactions ``idx`` stored at ``length`` (as
@@ -216,6 +238,7 @@ class ReactionBank:
         velocity: Tensor | None = None,
         pace: float = 0.0,
         mirror: Tensor | None = None,
+        stand: Tensor | None = None,
     ) -> tuple[int, Tensor, Tensor]:
         """For each row of ``query`` (B, p, r) a real reaction: the stored length it is of, its
         index (B,) there and (B,) whether the row had one at its pace. The reaction is one of the
@@ -231,16 +254,21 @@ class ReactionBank:
         :func:`umf.text.mirror_caption`), unit embeddings: the shortlist then holds only
         reactions whose captions are at least as near the prompt as its mirror image, so a
         prompt naming a side retrieves people on that side (a prompt naming none is its own
-        mirror image: no change). Whether each row had one within its pace is all True
-        without a pace, so a caller can keep what it had rather than take a reaction at the
-        wrong pace."""
+        mirror image: no change). ``stand`` (B,): +1 or -1 for a row whose reaction must
+        start on person 1's left (+x) or right, 0 for any side (a bank without starts, or a
+        row with no reaction on its side, ignores it). Whether each row had one within its
+        pace is all True without a pace, so a caller can keep what it had rather than take a
+        reaction at the wrong pace."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
         allowed = self._shortlisted(length, prompt, shortlist, d, mirror)
+        if stand is not None and length in self.starts:
+            allowed = self._on_side(length, stand.to(d), allowed)
         if allowed is not None:
             d = d.masked_fill(~allowed, float("inf"))
-        k = max(1, min(int(neighbours), bank.shape[0] if allowed is None else shortlist,
+        listed = allowed is not None and shortlist > 0
+        k = max(1, min(int(neighbours), shortlist if listed else bank.shape[0],
                        bank.shape[0]))  # fmt: skip
         at_pace = torch.ones(query.shape[0], dtype=torch.bool, device=query.device)
         if velocity is not None and pace > 0 and length in self.velocities:

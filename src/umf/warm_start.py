@@ -28,12 +28,14 @@ gesture does not glide, and a proposal from elsewhere only costs it its fit to t
 person 1's frame within that fraction of the first pass's. A person for whom the bank has
 none keeps the first pass (:func:`warm_rows`). ``sflow.warm_together`` c > 0 compares the
 bank with person 1's velocity instead, for the people whose first pass travels with person 1
-(:func:`travels_with`: a cosine of at least c): the first pass beside a runner lags and
-veers, and a reaction at its pace did too (runners side by side kept pace in 4 and 1 of 8
-seeds, two and three people; with it 7 and 6). A reaction nearer the leader's pace than the
-first pass then fits such a person even outside the tolerance. ``sflow.warm_side`` retrieves, for a prompt
-that names a side ("... the second person on the first one's left."), only reactions whose
-captions are at least as near the prompt as its mirror image: people on that side.
+(:func:`travels_with`: a cosine of at least c), among the reactions that start on the first
+pass's side of person 1 (:func:`start_side`, the bank's ``start_*``; the first pass says
+where the person stands): the first pass beside a runner lags and veers, and a reaction at
+its pace did too (results/umf-small-bandai-20261211). A reaction nearer the leader's pace
+than the first pass then fits such a person even outside the tolerance. ``sflow.warm_side``
+retrieves, for a prompt that names a side ("... the second person on the first one's
+left."), only reactions whose captions are at least as near the prompt as its mirror
+image: people on that side.
 
 ``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
 that time towards the P-Flow's single-person motion for the own prompt alone
@@ -111,6 +113,17 @@ def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
     return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
 
 
+# m to one side of person 1 under which a person stands on neither (the side check's margin)
+SIDE_MARGIN = 0.2
+
+
+def start_side(features: Tensor) -> Tensor:
+    """(B,) +1 where a person 2..N (features (B, T, 262), person 1's frame) starts more than
+    ``SIDE_MARGIN`` to person 1's left (+x), -1 to the right, 0 in between."""
+    x = features_to_joints(features[:, :1])[:, 0, 0, 0]
+    return torch.sign(x) * (x.abs() > SIDE_MARGIN)
+
+
 def glide_score(features: Tensor, fps: float) -> Tensor:
     """(B,) the slower ankle's mean floor speed over the pelvis's for features (B, T, 262);
     0 for a row whose pelvis travels under ``MOVING``. A stride keeps one foot near rest, a
@@ -164,11 +177,12 @@ def proposal(
             lead = floor_velocity(leader, fps)
             together = travels_with(own_pace, lead, cfg.warm_together)
             velocity = torch.where(together[:, None], lead, own_pace)
+        stand = None if together is None else start_side(decoded) * together
         bank, frames = pipe.reactions, decoded.shape[1]
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
-                                      side)  # fmt: skip
+                                      side, stand)  # fmt: skip
         z, waits = bank.latents[length].to(first)[idx], None
         if together is not None and length in bank.velocities:
             # beside a leader, a reaction nearer the leader's pace than the first pass fits,

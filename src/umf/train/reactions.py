@@ -14,6 +14,7 @@ from umf.coverage import embed
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
+from umf.representation import features_to_joints
 from umf.train.datasets import SceneDataset
 from umf.warm_start import floor_velocity, onsets
 
@@ -43,9 +44,9 @@ def build_reaction_bank(
     person 1's frame (mirrored at random, as in training; short striding scenes carried on
     where the S-Flow's ``train_sflow.repeat_scene_gait`` says), as the VAE's posterior means, with
     their scene's caption embedded by the model's text encoder, their pelvis's mean floor
-    velocity and, for people who answer person 1, how many frames after person 1's their
-    action starts in the whole scene (a crop may cut either onset; :func:`answer_waits`);
-    at most ``per_length`` per length, drawn with ``seed``.
+    velocity, where they start and, for people who answer person 1, how many frames after
+    person 1's their action starts in the whole scene (a crop may cut either onset;
+    :func:`answer_waits`); at most ``per_length`` per length, drawn with ``seed``.
     A length no scene is long enough for is left out; a corpus without multi-person train
     scenes raises :class:`NoReactions`."""
     corpus = Corpus.load(corpus_dir)
@@ -59,6 +60,7 @@ def build_reaction_bank(
     texts: dict[int, torch.Tensor] = {}
     velocities: dict[int, torch.Tensor] = {}
     lags: dict[int, torch.Tensor] = {}
+    starts: dict[int, torch.Tensor] = {}
     whole_lags: dict[str, list[int]] = {}  # per scene or take, its people's delays
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
@@ -85,12 +87,14 @@ def build_reaction_bank(
         row = {c: i for i, c in enumerate(distinct)}
         texts[frames] = embed(pipe.text_encoder, distinct)[[row[c] for c in chosen]]
         lags[frames] = torch.tensor([lag[i] for i in keep], dtype=torch.float32)
-        velocities[frames] = floor_velocity(pipe.normalizer.denormalize(x.cpu()), pipe.config.fps)
+        real = pipe.normalizer.denormalize(x.cpu())
+        velocities[frames] = floor_velocity(real, pipe.config.fps)
+        starts[frames] = features_to_joints(real[:, :1])[:, 0, 0][:, [0, 2]]
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
     if not latents:
         raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
-    return ReactionBank(latents, texts, velocities, lags)
+    return ReactionBank(latents, texts, velocities, lags, starts)
 
 
 def answer_waits(ds: SceneDataset, index: int) -> list[int]:
