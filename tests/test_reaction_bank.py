@@ -255,6 +255,8 @@ def test_the_bank_stores_each_reactions_pelvis_velocity(corpus, model):
     want = (pelvis[:, -1] - pelvis[:, 0]) * pipe.config.fps / 29
     torch.testing.assert_close(bank.velocities[30], want, atol=1e-5, rtol=1e-5)
     assert bank.velocities[30].norm(dim=-1).max() > 0.1  # the fixture's people travel
+    torch.testing.assert_close(bank.starts[30], pelvis[:, 0], atol=1e-5, rtol=1e-5)
+    assert (bank.starts[30][:, 0] > 0).any() and (bank.starts[30][:, 0] < 0).any()  # both sides
 
 
 def at_pace(bank, velocity, frames, pace, prompt=None, shortlist=0):
@@ -566,3 +568,29 @@ def test_the_pipeline_retimes_answers_and_only_answers(corpus, model):
     assert np.array_equal(off.joints, on.joints)
     off, on = both(answer, person=2)  # person 2 re-rolled: answers again
     assert not np.allclose(off.joints[1], on.joints[1])
+
+
+def test_stand_keeps_each_rows_reaction_on_its_side_of_person_1(tmp_path):
+    """``pick(stand=)``: +1 retrieves among reactions starting on person 1's left (+x), -1 on
+    the right, 0 anywhere; a row with nobody on its side keeps every candidate. The starts
+    round-trip through the file and a bad table is refused."""
+    g = torch.Generator().manual_seed(3)
+    latents = torch.randn(40, P, R, generator=g)
+    starts = torch.stack([torch.linspace(-2, 2, 40), torch.zeros(40)], dim=1)
+    starts[20] = torch.tensor([0.3, 0.0])  # the nearest to every query below stands left
+    bank = ReactionBank({30: latents}, starts={30: starts})
+    query = latents[20:21].expand(3, -1, -1) + 0.01
+    stand = torch.tensor([1.0, -1.0, 0.0])
+    for s in range(10):
+        length, idx, _ = bank.pick(query, 30, 3, torch.Generator().manual_seed(s), stand=stand)
+        x = starts[idx, 0]
+        assert x[0] > 0 and x[1] < 0, x
+    assert int(bank.pick(query, 30, 1, stand=stand)[1][2]) == 20  # any side: the nearest
+    left = ReactionBank({30: latents[:3]}, starts={30: starts[20:23]})  # nobody on the right
+    assert left.pick(latents[:1], 30, 1, stand=torch.tensor([-1.0]))[1].tolist() == [0]
+    bank.save(tmp_path)
+    torch.testing.assert_close(ReactionBank.load(tmp_path).starts[30], starts, atol=2e-3,
+                               rtol=1e-3)  # fmt: skip
+    ReactionBank({30: latents}, starts={30: starts[:, :1]}).save(tmp_path)
+    with pytest.raises(UMFError, match="starts of 30 frames"):
+        ReactionBank.load(tmp_path)

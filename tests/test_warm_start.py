@@ -400,6 +400,19 @@ def test_warm_together_retrieves_at_the_leaders_pace(models, monkeypatch):
         z, fits = run(0.8)  # the leader's: the fast one, 28 % slow but nearer than 1.0
         assert torch.equal(z[0], fast[0]) and fits.tolist() == [True, True]
         assert torch.equal(z[1], slow[0])  # walking away: its own pace, as before
+        # the first pass starts on person 1's right: a fast reaction there, farther in latent
+        # space, is taken over the one on the left
+        right = fast + 0.5
+        pipe.reactions = ReactionBank(
+            {30: torch.cat([slow, fast, slow, right])},
+            velocities={30: torch.tensor([[0.0, 1.0], [0.0, 1.8], [0.0, -1.0], [0.0, 1.8]])},
+            starts={30: torch.tensor([[-0.9, 0.0], [0.9, 0.0], [-0.9, 0.0], [-0.9, 0.0]])},
+        )
+        monkeypatch.setattr(umf.warm_start, "start_side", lambda f: torch.tensor([-1.0, 1.0]))
+        z, _ = run(0.8)
+        assert torch.equal(z[0], right[0])
+        z, _ = run(0.0)  # its own pace: no side asked, the slow one
+        assert torch.equal(z[0], slow[0])
     finally:
         (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
          pipe.reactions) = old  # fmt: skip
@@ -414,3 +427,14 @@ def test_warm_together_needs_a_retrieved_proposal_at_a_pace():
         check_config_values(set_option(tiny_config(), "sflow.warm_together=0.8"))
     with pytest.raises(UMFError, match="warm_together"):
         check_config_values(set_option(tiny_config(), "sflow.warm_together=1.5"))
+
+
+def test_start_side_reads_the_first_frames_pelvis_beyond_the_side_margin():
+    from umf.warm_start import SIDE_MARGIN, start_side
+
+    walks = []
+    for x in (1.0, -0.6, SIDE_MARGIN / 2, -SIDE_MARGIN / 2):
+        f = _gait(True)  # its pelvis starts at x = -0.2
+        f[:, rep.POS] += torch.tensor([x + 0.2, 0.0, 0.0], dtype=f.dtype).repeat(22)
+        walks.append(f)
+    assert start_side(torch.stack(walks)).tolist() == [1.0, -1.0, 0.0, 0.0]
