@@ -14,7 +14,7 @@ import torch
 from conftest import MODULE, FakeText, prepare_fixture_corpus, save_tiny_model
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline
-from umf.reaction_bank import REACTIONS, ReactionBank
+from umf.reaction_bank import REACTIONS, SIDE_MARGIN, ReactionBank
 from umf.train.reactions import bank_lengths, build_reaction_bank
 
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -582,12 +582,22 @@ def test_stand_keeps_each_rows_reaction_on_its_side_of_person_1(tmp_path):
     query = latents[20:21].expand(3, -1, -1) + 0.01
     stand = torch.tensor([1.0, -1.0, 0.0])
     for s in range(10):
-        length, idx, _ = bank.pick(query, 30, 3, torch.Generator().manual_seed(s), stand=stand)
+        _, idx, _ = bank.pick(query, 30, 3, torch.Generator().manual_seed(s), stand=stand)
         x = starts[idx, 0]
-        assert x[0] > 0 and x[1] < 0, x
+        assert x[0] > SIDE_MARGIN and x[1] < -SIDE_MARGIN, x
     assert int(bank.pick(query, 30, 1, stand=stand)[1][2]) == 20  # any side: the nearest
+    near = starts.clone()
+    near[20, 0] = SIDE_MARGIN / 2  # within the margin: on neither side
+    on_neither = ReactionBank({30: latents}, starts={30: near})
+    assert int(on_neither.pick(query[:1], 30, 1, stand=stand[:1])[1][0]) != 20
     left = ReactionBank({30: latents[:3]}, starts={30: starts[20:23]})  # nobody on the right
     assert left.pick(latents[:1], 30, 1, stand=torch.tensor([-1.0]))[1].tolist() == [0]
+    # no side asked changes nothing, with a shortlist the bank cannot use (no captions)
+    for s in range(5):
+        g = (torch.Generator().manual_seed(s), torch.Generator().manual_seed(s))
+        a = bank.pick(query, 30, 4, g[0], shortlist=2)[1]
+        b = bank.pick(query, 30, 4, g[1], shortlist=2, stand=torch.zeros(3))[1]
+        assert torch.equal(a, b)
     bank.save(tmp_path)
     torch.testing.assert_close(ReactionBank.load(tmp_path).starts[30], starts, atol=2e-3,
                                rtol=1e-3)  # fmt: skip

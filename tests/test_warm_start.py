@@ -378,8 +378,10 @@ def test_warm_together_retrieves_at_the_leaders_pace(models, monkeypatch):
     monkeypatch.setattr(umf.warm_start, "floor_velocity",
                         lambda f, fps: own if f is decoded else lead)  # fmt: skip
     slow, fast = first[:1], first[:1] + 1.0  # the first pass's latent is nearest the slow one
-    bank = ReactionBank({30: torch.cat([slow, fast, slow])},
-                        velocities={30: torch.tensor([[0.0, 1.0], [0.0, 1.8], [0.0, -1.0]])})
+    bank = ReactionBank(
+        {30: torch.cat([slow, fast, slow])},
+        velocities={30: torch.tensor([[0.0, 1.0], [0.0, 1.8], [0.0, -1.0]])},
+    )
     text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
     cfg = pipe.config.sflow
     old = (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
@@ -388,11 +390,11 @@ def test_warm_together_retrieves_at_the_leaders_pace(models, monkeypatch):
         cfg.warm_pace, cfg.warm_proposal, cfg.warm_neighbours = 0.1, "retrieved", 1
         pipe.reactions = bank
 
-        def run(together: float):
+        def run(together: float, mirror=None):
             cfg.warm_together = together
             gens = [torch.Generator().manual_seed(s) for s in range(2)]
             z, _, fits, _ = proposal(pipe, first, decoded, text, uncond, gens, None, {},
-                                     leader=decoded.flip(0))  # fmt: skip
+                                     mirror=mirror, leader=decoded.flip(0))  # fmt: skip
             return z, fits
 
         z, fits = run(0.0)  # its own pace: the slow one
@@ -411,6 +413,10 @@ def test_warm_together_retrieves_at_the_leaders_pace(models, monkeypatch):
         monkeypatch.setattr(umf.warm_start, "start_side", lambda f: torch.tensor([-1.0, 1.0]))
         z, _ = run(0.8)
         assert torch.equal(z[0], right[0])
+        assert torch.equal(run(0.8, mirror=text)[0][0], right[0])  # names no side: the same
+        # a prompt that names a side leaves the side to sflow.warm_side: the nearest again
+        other = pipe.text_encoder.encode(["two people run, the second on the left"] * 2)
+        assert torch.equal(run(0.8, mirror=other)[0][0], fast[0])
         z, _ = run(0.0)  # its own pace: no side asked, the slow one
         assert torch.equal(z[0], slow[0])
     finally:

@@ -63,11 +63,11 @@ class VAEConfig:
     # at 0.0002 the val pairs' "distance" checks fell from 90 to 80 %, at 0.001 they stay
     # at 90 %. None = root_fusion
     reaction_root_fusion: float | None = 0.001
-    # a generated person 1's fused floor path is moved to start over the origin (where
-    # every training crop starts it, representation.pin_floor_start) rather than where
-    # its decoded positions sit on average: a P-Flow runner's positions travel half as far
-    # as its velocities, the fused start lands 1-2 m behind the origin and people 2..N,
-    # placed relative to the origin, run ahead of it
+    # a generated person 1's fused floor path (a single person's too) is moved to start
+    # over the origin (where every training crop starts it, representation.pin_floor_start)
+    # rather than where its decoded positions sit on average: a P-Flow runner's positions
+    # travel half as far as its velocities, the fused start lands 1-2 m behind the origin
+    # and people 2..N, placed relative to the origin, run ahead of it
     pin_leader_start: bool = False
 
     def fusion_weights(self, reaction: bool = False) -> tuple[float, float, float | None]:

@@ -366,7 +366,7 @@ class UMFPipeline:
         raw = self._decode_raw(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
         vae = self.config.vae  # person 1 and people 2..N fuse their floor paths differently
         lead = fuse_positions(raw[:, :1], *vae.fusion_weights())
-        if vae.pin_leader_start and actor is None:
+        if vae.pin_leader_start:  # a user's actor replaces person 1 below, unmoved
             lead = pin_floor_start(lead)
         feats = torch.cat([lead, fuse_positions(raw[:, 1:], *vae.fusion_weights(reaction=True))],
                           dim=1)  # fmt: skip
@@ -423,7 +423,8 @@ class UMFPipeline:
     def decode(self, z: torch.Tensor, num_frames: int, reaction: bool = False) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262). ``reaction``: people
         2..N (the S-Flow's), whose floor path may trust its decoded positions more
-        (``vae.reaction_root_fusion``): they are placed relative to person 1."""
+        (``vae.reaction_root_fusion``): they are placed relative to person 1. Person 1's
+        path starts over the origin with ``vae.pin_leader_start``."""
         raw = self._decode_raw(z, num_frames)
         out = fuse_positions(raw, *self.config.vae.fusion_weights(reaction))
         return pin_floor_start(out) if self.config.vae.pin_leader_start and not reaction else out

@@ -13,7 +13,9 @@ the S-Flow trains on), with their scene captions' embeddings (``text_*``) and th
 pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``), and, for
 a person whose relation answers person 1 (a bow back, a response), how many frames after
 person 1's their action starts in the whole scene (``lag_*``,
-:func:`umf.data.relations.action_onset`; 0 for everybody else). They are derived from the
+:func:`umf.data.relations.action_onset`; 0 for everybody else), and where the person's
+pelvis starts on the floor, (x, z) in m in person 1's frame (``start_*``). They are derived
+from the
 training data and carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
@@ -44,6 +46,9 @@ START = "start_"
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
+# m to one side of person 1 under which a person stands on neither (the relation checks'
+# "side" margin, umf.data.relations.check)
+SIDE_MARGIN = 0.2
 
 Tensor = torch.Tensor
 
@@ -180,10 +185,10 @@ class ReactionBank:
 
     def _on_side(self, length: int, stand: Tensor, allowed: Tensor | None) -> Tensor | None:
         """``allowed`` (B, N) (None: every reaction) narrowed, for the rows whose ``stand``
-        (B,) is +1 or -1, to the reactions starting on that side of person 1; a row with
-        none there keeps what it had."""
-        side = torch.sign(self.starts[length][:, 0]).to(stand)  # (N,)
-        on = (stand[:, None] == 0) | (side[None] == stand[:, None])
+        (B,) is +1 or -1, to the reactions starting more than ``SIDE_MARGIN`` to that side of
+        person 1; a row with none there keeps what it had."""
+        x = self.starts[length][:, 0].to(stand)  # (N,)
+        on = (stand[:, None] == 0) | (x[None] * stand[:, None] > SIDE_MARGIN)
         if allowed is not None:
             on = on & allowed
         none = ~on.any(dim=1)
@@ -262,13 +267,13 @@ class ReactionBank:
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
-        allowed = self._shortlisted(length, prompt, shortlist, d, mirror)
+        listed = self._shortlisted(length, prompt, shortlist, d, mirror)
+        allowed = listed
         if stand is not None and length in self.starts:
             allowed = self._on_side(length, stand.to(d), allowed)
         if allowed is not None:
             d = d.masked_fill(~allowed, float("inf"))
-        listed = allowed is not None and shortlist > 0
-        k = max(1, min(int(neighbours), shortlist if listed else bank.shape[0],
+        k = max(1, min(int(neighbours), bank.shape[0] if listed is None else shortlist,
                        bank.shape[0]))  # fmt: skip
         at_pace = torch.ones(query.shape[0], dtype=torch.bool, device=query.device)
         if velocity is not None and pace > 0 and length in self.velocities:

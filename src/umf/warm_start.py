@@ -59,7 +59,7 @@ from umf.config import MULTI_PERSON, SINGLE_PERSON
 from umf.data.relations import ONSET_SMOOTHING, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
-from umf.reaction_bank import REACTIONS
+from umf.reaction_bank import REACTIONS, SIDE_MARGIN
 from umf.representation import (
     features_to_joints,
     hold_to_length,
@@ -113,8 +113,8 @@ def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
     return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
 
 
-# m to one side of person 1 under which a person stands on neither (the side check's margin)
-SIDE_MARGIN = 0.2
+# how far apart (unit embeddings) a prompt and its mirror image must be for it to name a side
+NAMES_A_SIDE = 1e-3
 
 
 def start_side(features: Tensor) -> Tensor:
@@ -157,8 +157,9 @@ def proposal(
     of each row's reaction; else None.
     ``mirror``: the prompts' mirror images (:func:`mirror_text`), for retrieval on the side
     a prompt names; ``timing`` False: no answer is looked for (a re-rolled person 1);
-    ``leader`` (B, T, 262): person 1 as the pipeline decodes them, whose pace the rows that
-    travel with them keep (``sflow.warm_together``)."""
+    ``leader`` (B, T, 262): person 1 as the pipeline decodes them (for a re-rolled person 1,
+    person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
+    their first pass's side unless the prompt names one."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -177,7 +178,12 @@ def proposal(
             lead = floor_velocity(leader, fps)
             together = travels_with(own_pace, lead, cfg.warm_together)
             velocity = torch.where(together[:, None], lead, own_pace)
-        stand = None if together is None else start_side(decoded) * together
+        stand = None
+        if together is not None:  # a side the prompt names is warm_side's to keep
+            named = torch.zeros_like(together)
+            if side is not None:  # a prompt naming no side is its own mirror image
+                named = (side - prompt).norm(dim=-1).to(together.device) > NAMES_A_SIDE
+            stand = start_side(decoded) * (together & ~named)
         bank, frames = pipe.reactions, decoded.shape[1]
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
@@ -362,7 +368,9 @@ def sample_added(
         return w, nfe + m + n
     if cfg.warm_start:
         decoded = pipe.decode(w, frames, reaction=True)  # once: proposal and glide read it
-        leader = pipe.decode(prev[:, 0], frames) if cfg.warm_together > 0 else None
+        # person 1 (for a re-rolled person 1, person 2: the one they keep pace with)
+        leader = (pipe.decode(prev[:, 0], frames, reaction=not answers_first)
+                  if cfg.warm_together > 0 else None)  # fmt: skip
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
                                        timing=answers_first, leader=leader)  # fmt: skip
