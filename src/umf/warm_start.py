@@ -113,10 +113,6 @@ def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
     return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
 
 
-# how far apart (unit embeddings) a prompt and its mirror image must be for it to name a side
-NAMES_A_SIDE = 1e-3
-
-
 def start_side(features: Tensor) -> Tensor:
     """(B,) +1 where a person 2..N (features (B, T, 262), person 1's frame) starts more than
     ``SIDE_MARGIN`` to person 1's left (+x), -1 to the right, 0 in between."""
@@ -159,7 +155,7 @@ def proposal(
     a prompt names; ``timing`` False: no answer is looked for (a re-rolled person 1);
     ``leader`` (B, T, 262): person 1 as the pipeline decodes them (for a re-rolled person 1,
     person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
-    their first pass's side unless the prompt names one."""
+    their first pass's side."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -178,12 +174,10 @@ def proposal(
             lead = floor_velocity(leader, fps)
             together = travels_with(own_pace, lead, cfg.warm_together)
             velocity = torch.where(together[:, None], lead, own_pace)
-        stand = None
-        if together is not None:  # a side the prompt names is warm_side's to keep
-            named = torch.zeros_like(together)
-            if side is not None:  # a prompt naming no side is its own mirror image
-                named = (side - prompt).norm(dim=-1).to(together.device) > NAMES_A_SIDE
-            stand = start_side(decoded) * (together & ~named)
+        # the first pass's side, also where the prompt names one: the S-Flow reads a named
+        # side since 20261208, more surely than warm_side's caption shortlist, which also
+        # holds reactions whose captions name none (results/umf-small-bandai-20261211)
+        stand = None if together is None else start_side(decoded) * together
         bank, frames = pipe.reactions, decoded.shape[1]
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
