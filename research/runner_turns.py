@@ -1,0 +1,98 @@
+"""How much runners side by side turn: the P-Flow's leader against the training crops.
+
+    python research/runner_turns.py [MODEL_DIR] [--corpus CORPUS] [--seeds 8]
+
+1. The train split's ``run_side_by_side`` scenes as the S-Flow and the reaction bank see
+   them (4-second crops, person 1's frame, the model's ``repeat_scene_gait``): how far each
+   person's path turns, the angle between its first and second 2-second chords
+   (+: to the left).
+2. "Two people run side by side." and "Three people run side by side." (4 s, seeds 0..N-1,
+   delivered): the leader's turn, chord and path speed, and each follower's start and end
+   along the leader's heading and speed over the leader's (``research/keep_pace.py``'s
+   measure; FAIL: someone ends more than 1 m behind).
+"""
+
+from __future__ import annotations
+
+import argparse
+
+import numpy as np
+import torch
+
+HALF = 60  # frames: the 2-second chords of a 4-second crop (30 fps)
+
+
+def turn_deg(path: np.ndarray) -> float:
+    """The angle (degrees, + to the left) from a floor path's (T, 2) first 2-second chord to
+    its second."""
+    a, b = path[HALF] - path[0], path[-1] - path[HALF]
+    return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
+
+
+def training_turns(pipe, corpus) -> None:
+    from umf.representation import features_to_joints
+    from umf.train.datasets import SceneDataset
+
+    frames = 2 * HALF
+    ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames, max_frames=frames,
+                      mirror=True, seed=0,
+                      repeat_gait=pipe.config.train_sflow.repeat_scene_gait)  # fmt: skip
+    turns: list[list[float]] = [[], []]
+    for i, (kind, item, _) in enumerate(ds.items):
+        if kind != "scene" or item.get("relation") != "run_side_by_side":
+            continue
+        f = ds[i]["features"]
+        if f.shape[1] != frames:
+            continue
+        j = features_to_joints(pipe.normalizer.denormalize(f)).numpy()[:, :, 0][..., [0, 2]]
+        for k in (0, 1):
+            turns[k].append(turn_deg(j[k]))
+    for k, name in ((0, "person 1"), (1, "person 2")):
+        t = np.array(turns[k])
+        p10, p50, p90 = np.percentile(t, [10, 50, 90])
+        wide = float(np.mean(abs(t) > 20))
+        print(f"1. training crops ({len(t)}), {name}: turn p10 / median / p90 {p10:+.0f} / "
+              f"{p50:+.0f} / {p90:+.0f} deg; more than 20 deg: {wide:.2f}")  # fmt: skip
+
+
+def generated_turns(pipe, seeds: int) -> None:
+    fps = pipe.config.fps
+    for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
+        for s in range(seeds):
+            (scene,) = pipe(prompt, num_people=n, seconds=4.0, seed=s)
+            p = np.asarray(scene.joints)[:, :, 0][..., [0, 2]]
+            chord = p[0, -1] - p[0, 0]
+            length = float(np.linalg.norm(chord))
+            heading = chord / max(length, 1e-9)
+            seconds = (p.shape[1] - 1) / fps
+            path = float(np.linalg.norm(np.diff(p[0], axis=0), axis=1).sum())
+            people, fail = [], False
+            for k in range(1, n):
+                start = float((p[k, 0] - p[0, 0]) @ heading)
+                end = float((p[k, -1] - p[0, -1]) @ heading)
+                ratio = float(np.linalg.norm(p[k, -1] - p[k, 0])) / max(length, 1e-9)
+                fail |= end < -1.0 or abs(ratio - 1) > 0.2
+                people.append(f"P{k + 1} start {start:+.2f} end {end:+.2f} m, {ratio:.2f}x")
+            print(f"2. {n} people, seed {s}: leader turns {turn_deg(p[0]):+.0f} deg, chord "
+                  f"{length / seconds:.2f} m/s, path {path / seconds:.2f} m/s | "
+                  + "; ".join(people) + (" FAIL" if fail else ""))  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("model", nargs="?", default=None)
+    ap.add_argument("--corpus", default="out/corpus")
+    ap.add_argument("--seeds", type=int, default=8)
+    args = ap.parse_args()
+
+    from umf.data.corpus import Corpus
+    from umf.pipeline import UMFPipeline
+
+    torch.set_grad_enabled(False)
+    pipe = UMFPipeline.from_pretrained(args.model)
+    training_turns(pipe, Corpus.load(args.corpus))
+    generated_turns(pipe, args.seeds)
+
+
+if __name__ == "__main__":
+    main()
