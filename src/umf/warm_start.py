@@ -294,8 +294,8 @@ def retime(reaction: Tensor, leader: Tensor, lag: Tensor, passes: int = 2) -> Te
 
 
 def timed_proposal(pipe: Any, guess: Tensor, prev: Tensor,
-                   timing: tuple[Tensor, list[int]] | None, frames: int
-                   ) -> tuple[Tensor, Tensor]:  # fmt: skip
+                   timing: tuple[Tensor, list[int]] | None, frames: int,
+                   leader: Tensor | None = None) -> tuple[Tensor, Tensor]:  # fmt: skip
     """With ``sflow.warm_timing`` w > 0, the rows of ``guess`` (B, p, r) that :func:`answers`
     found an answer for (a wait of at least w frames in ``timing``) decoded at the length
     they were stored at, carried on or cut to ``frames``
@@ -303,7 +303,8 @@ def timed_proposal(pipe: Any, guess: Tensor, prev: Tensor,
     long after the generated person 1 (``prev[:, 0]``) as they did after their own, and
     re-encoded; the others as they were. Also (B,) which rows were moved: the second pass
     from them replaces the first pass whether it glides or not. The S-Flow's first pass
-    answers a bow at the average delay it saw (module notes)."""
+    answers a bow at the average delay it saw (module notes). ``leader`` (B, T, 262):
+    ``prev[:, 0]`` already decoded, if it was."""
     answer = torch.zeros(guess.shape[0], dtype=torch.bool, device=guess.device)
     if pipe.config.sflow.warm_timing <= 0 or timing is None:
         return guess, answer
@@ -312,7 +313,8 @@ def timed_proposal(pipe: Any, guess: Tensor, prev: Tensor,
     if not answer.any():
         return guess, answer
     rows = answer.nonzero().flatten()
-    leader = pipe.decode(prev[rows, 0], frames)  # person 1 as the pipeline decodes them
+    # person 1 as the pipeline decodes them (already decoded for sflow.warm_together)
+    leader = pipe.decode(prev[rows, 0], frames) if leader is None else leader[rows]
     own = torch.stack([hold_to_length(pipe.decode(guess[i : i + 1], stored[i], reaction=True)[0],
                                       frames) for i in rows.tolist()])  # fmt: skip
     out = guess.clone()
@@ -368,7 +370,7 @@ def sample_added(
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
                                        timing=answers_first, leader=leader)  # fmt: skip
-        guess, answer = timed_proposal(pipe, guess, prev, lag, frames)
+        guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer
