@@ -313,6 +313,9 @@ def test_a_finetune_on_solo_clips_keeps_the_base_bank_or_turns_the_warm_start_of
     monkeypatch.setattr(reactions, "write_reactions", none)
     for own_vae in (False, True):
         out = Path(shutil.copytree(model, tmp_path / f"out-{own_vae}"))
+        cfg = json.loads((out / "config.json").read_text())  # as the bundled model samples
+        cfg["sflow"] |= {"warm_pace": 0.15, "warm_together": 0.8}
+        (out / "config.json").write_text(json.dumps(cfg))
         logs: list[str] = []
         give_reactions(out, tmp_path, base, own_vae, False, logs.append)
         cfg = json.loads((out / "config.json").read_text())
