@@ -141,7 +141,7 @@ def proposal(
     guidance: float | None,
     own: dict[str, Any],
     mirror: Any = None,
-    timing: bool = True,
+    answers_first: bool = True,
     leader: Tensor | None = None,
 ) -> tuple[Tensor, int, Tensor, tuple[Tensor, list[int]] | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
@@ -152,7 +152,7 @@ def proposal(
     person 1's each answer started (0 for a row that does not answer) and the stored length
     of each row's reaction; else None.
     ``mirror``: the prompts' mirror images (:func:`mirror_text`), for retrieval on the side
-    a prompt names; ``timing`` False: no answer is looked for (a re-rolled person 1);
+    a prompt names; ``answers_first`` False: no answer is looked for (a re-rolled person 1);
     ``leader`` (B, T, 262): person 1 as the pipeline decodes them (for a re-rolled person 1,
     person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
     their first pass's side."""
@@ -190,7 +190,7 @@ def proposal(
             got = bank.velocities[length].to(velocity)[idx]
             nearer = (got - velocity).norm(dim=-1) < (own_pace - velocity).norm(dim=-1)
             fits = fits | (together & nearer)
-        if timing and bank.lags and cfg.warm_timing > 0:
+        if answers_first and bank.lags and cfg.warm_timing > 0:
             z, lag, stored = answers(bank, first, frames, z, cfg, generator,
                                      pipe.sflow.latent_norm.normalize, prompt)  # fmt: skip
             waits = (lag, stored)
@@ -369,7 +369,7 @@ def sample_added(
                   if cfg.warm_together > 0 else None)  # fmt: skip
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
-                                       timing=answers_first, leader=leader)  # fmt: skip
+                                       answers_first=answers_first, leader=leader)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
