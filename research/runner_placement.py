@@ -25,19 +25,25 @@ from umf.representation import features_to_joints
 from umf.train.datasets import SceneDataset
 
 
+def run_crops(pipe: UMFPipeline, corpus: Corpus, frames: int, mirror: bool = False):
+    """Joints (N, T, 22, 3) of each train ``run_side_by_side`` scene as the S-Flow's loader
+    crops it to ``frames`` (person 1's frame, the model's ``repeat_scene_gait``; ``mirror``:
+    mirrored at random, as the S-Flow and the reaction bank see them); scenes too short for
+    the crop are left out."""
+    ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames, max_frames=frames,
+                      mirror=mirror, seed=0,
+                      repeat_gait=pipe.config.train_sflow.repeat_scene_gait)  # fmt: skip
+    for i, (kind, item, _) in enumerate(ds.items):
+        if kind == "scene" and item.get("relation") == "run_side_by_side":
+            f = ds[i]["features"]
+            if f.shape[1] == frames:
+                yield features_to_joints(pipe.normalizer.denormalize(f)).numpy()
+
+
 def training_crops(pipe: UMFPipeline, corpus: Corpus) -> None:
     for frames in (60, 120):
-        ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames, max_frames=frames,
-                          mirror=False, seed=0,
-                          repeat_gait=pipe.config.train_sflow.repeat_scene_gait)  # fmt: skip
         side, speed = [], []
-        for i, (kind, item, _) in enumerate(ds.items):
-            if kind != "scene" or item.get("relation") != "run_side_by_side":
-                continue
-            f = ds[i]["features"]
-            if f.shape[1] != frames:
-                continue
-            j = features_to_joints(pipe.normalizer.denormalize(f)).numpy()
+        for j in run_crops(pipe, corpus, frames):
             side.append(abs(j[1, 0, 0, 0]))
             speed.append(np.linalg.norm(j[0, -1, 0, [0, 2]] - j[0, 0, 0, [0, 2]]) * pipe.config.fps
                          / (frames - 1))  # fmt: skip

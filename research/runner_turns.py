@@ -15,9 +15,15 @@
 from __future__ import annotations
 
 import argparse
+import sys
+from pathlib import Path
 
 import numpy as np
 import torch
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from keep_pace import pace
+from runner_placement import run_crops
 
 HALF = 60  # frames: the 2-second chords of a 4-second crop (30 fps)
 
@@ -30,23 +36,10 @@ def turn_deg(path: np.ndarray) -> float:
 
 
 def training_turns(pipe, corpus) -> None:
-    from umf.representation import features_to_joints
-    from umf.train.datasets import SceneDataset
-
-    frames = 2 * HALF
-    ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames, max_frames=frames,
-                      mirror=True, seed=0,
-                      repeat_gait=pipe.config.train_sflow.repeat_scene_gait)  # fmt: skip
     turns: list[list[float]] = [[], []]
-    for i, (kind, item, _) in enumerate(ds.items):
-        if kind != "scene" or item.get("relation") != "run_side_by_side":
-            continue
-        f = ds[i]["features"]
-        if f.shape[1] != frames:
-            continue
-        j = features_to_joints(pipe.normalizer.denormalize(f)).numpy()[:, :, 0][..., [0, 2]]
+    for j in run_crops(pipe, corpus, 2 * HALF, mirror=True):
         for k in (0, 1):
-            turns[k].append(turn_deg(j[k]))
+            turns[k].append(turn_deg(j[k, :, 0][:, [0, 2]]))
     for k, name in ((0, "person 1"), (1, "person 2")):
         t = np.array(turns[k])
         p10, p50, p90 = np.percentile(t, [10, 50, 90])
@@ -60,21 +53,18 @@ def generated_turns(pipe, seeds: int) -> None:
     for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
         for s in range(seeds):
             (scene,) = pipe(prompt, num_people=n, seconds=4.0, seed=s)
-            p = np.asarray(scene.joints)[:, :, 0][..., [0, 2]]
-            chord = p[0, -1] - p[0, 0]
-            length = float(np.linalg.norm(chord))
-            heading = chord / max(length, 1e-9)
-            seconds = (p.shape[1] - 1) / fps
-            path = float(np.linalg.norm(np.diff(p[0], axis=0), axis=1).sum())
+            j = np.asarray(scene.joints)
+            speed, end, start = pace(j, fps)
+            p = j[0, :, 0][:, [0, 2]]
+            path = float(np.linalg.norm(np.diff(p, axis=0), axis=1).sum()) * fps / (len(p) - 1)
             people, fail = [], False
             for k in range(1, n):
-                start = float((p[k, 0] - p[0, 0]) @ heading)
-                end = float((p[k, -1] - p[0, -1]) @ heading)
-                ratio = float(np.linalg.norm(p[k, -1] - p[k, 0])) / max(length, 1e-9)
-                fail |= end < -1.0 or abs(ratio - 1) > 0.2
-                people.append(f"P{k + 1} start {start:+.2f} end {end:+.2f} m, {ratio:.2f}x")
-            print(f"2. {n} people, seed {s}: leader turns {turn_deg(p[0]):+.0f} deg, chord "
-                  f"{length / seconds:.2f} m/s, path {path / seconds:.2f} m/s | "
+                ratio = speed[k] / max(speed[0], 1e-9)
+                fail |= end[k] < -1.0 or abs(ratio - 1) > 0.2
+                people.append(f"P{k + 1} start {start[k]:+.2f} end {end[k]:+.2f} m, "
+                              f"{ratio:.2f}x")  # fmt: skip
+            print(f"2. {n} people, seed {s}: leader turns {turn_deg(p):+.0f} deg, chord "
+                  f"{speed[0]:.2f} m/s, path {path:.2f} m/s | "
                   + "; ".join(people) + (" FAIL" if fail else ""))  # fmt: skip
 
 

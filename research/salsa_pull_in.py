@@ -20,7 +20,8 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from teach_report import SALSA, closeness, salsa_pass
+from salsa_seeds import salsa_couples
+from teach_report import closeness, salsa_pass
 
 
 def pulled_in(j: np.ndarray, pelvis: float, clearance: float) -> tuple[np.ndarray, float]:
@@ -55,13 +56,8 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=8)
     args = ap.parse_args()
 
-    from umf.pipeline import UMFPipeline
-
-    pipe = UMFPipeline.from_pretrained(args.model)
     rows = []
-    for s in range(args.seeds):
-        (scene,) = pipe(SALSA, num_people=2, seconds=4.0, seed=s)
-        j = np.asarray(scene.joints, dtype=np.float64)
+    for s, j in salsa_couples(args.model, args.seeds):
         m, moved = pulled_in(j, args.pelvis, args.clearance)
         a, b = closeness(j), closeness(m)
         rows.append(b)

@@ -20,19 +20,26 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 from teach_report import SALSA, closeness, salsa_pass
 
 
+def salsa_couples(model: Path | None, seeds: int):
+    """(seed, joints (2, T, 22, 3) as delivered) of "Two people dance salsa together.", 4 s,
+    seeds 0..seeds-1, from the model directory (None: the bundled model)."""
+    from umf.pipeline import UMFPipeline
+
+    pipe = UMFPipeline.from_pretrained(model)
+    for s in range(seeds):
+        (scene,) = pipe(SALSA, num_people=2, seconds=4.0, seed=s)
+        yield s, np.asarray(scene.joints, dtype=np.float64)
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", type=Path, nargs="?", default=None)
     ap.add_argument("--seeds", type=int, default=8)
     args = ap.parse_args()
 
-    from umf.pipeline import UMFPipeline
-
-    pipe = UMFPipeline.from_pretrained(args.model)
     rows = []
-    for s in range(args.seeds):
-        (scene,) = pipe(SALSA, num_people=2, seconds=4.0, seed=s)
-        c = closeness(np.asarray(scene.joints))
+    for s, joints in salsa_couples(args.model, args.seeds):
+        c = closeness(joints)
         rows.append(c)
         print(s, {k: round(v, 3) if isinstance(v, float) else v for k, v in c.items()},
               salsa_pass(c))  # fmt: skip

@@ -60,17 +60,26 @@ def round_trip(pipe: UMFPipeline, features: torch.Tensor, reaction: bool) -> tor
     return pipe.decode(pipe._encode(features), features.shape[1], reaction=reaction)
 
 
+def label_clips(corpus: Corpus, splits: list[str], label: str, frames: int,
+                clips: int) -> torch.Tensor | None:  # fmt: skip
+    """Features (B, frames, 262), canonical, of up to ``clips`` single-person clips of
+    ``label`` longer than ``frames`` in ``splits``, in order; None where there are none."""
+    chosen = [c for split in splits for c in corpus.split_clips(split)
+              if c.num_people == 1 and c.meta.get("content") == label
+              and c.num_frames > frames + 1][:clips]  # fmt: skip
+    if not chosen:
+        return None
+    return torch.stack([canonicalize_features(torch.from_numpy(corpus.clip_features(c))[0]
+                                              .float()[:frames]) for c in chosen])  # fmt: skip
+
+
 def shift_table(pipe: UMFPipeline, corpus: Corpus, split: str, frames: int, clips: int) -> None:
     print(f"1. clips held still before they play ({frames} frames, up to {clips} per label, "
           f"{split}): median onset, input -> reconstruction")  # fmt: skip
     for label in LABELS:
-        chosen = [c for c in corpus.split_clips(split)
-                  if c.num_people == 1 and c.meta.get("content") == label
-                  and c.num_frames > frames + 1][:clips]  # fmt: skip
-        if not chosen:
+        base = label_clips(corpus, [split], label, frames, clips)
+        if base is None:
             continue
-        base = torch.stack([canonicalize_features(torch.from_numpy(corpus.clip_features(c))[0]
-                                                  .float()[:frames]) for c in chosen])  # fmt: skip
         for smooth in (1, ONSET_SMOOTHING):
             cells = []
             for s in SHIFTS:
@@ -78,7 +87,7 @@ def shift_table(pipe: UMFPipeline, corpus: Corpus, split: str, frames: int, clip
                 back = round_trip(pipe, held, reaction=True)
                 cells.append(f"+{s}: {np.median([onset(f, smooth) for f in held]):.0f} -> "
                              f"{np.median([onset(f, smooth) for f in back]):.0f}")  # fmt: skip
-            print(f"  {label:20s} ({len(chosen)}) averaged over {smooth}: " + " | ".join(cells))
+            print(f"  {label:20s} ({len(base)}) averaged over {smooth}: " + " | ".join(cells))
 
 
 def wrist_table(pipe: UMFPipeline, corpus: Corpus, split: str, frames: int, clips: int) -> None:
@@ -177,13 +186,9 @@ def readings_table(pipe: UMFPipeline, corpus: Corpus, frames: int, clips: int) -
             passed[name][split] = (np.mean(got[name][0]), np.mean(got[name][1]), len(recipes))
     gaps = {name: [] for name in READINGS}
     for label in sorted({c.meta.get("content") for c in corpus.clips if c.num_people == 1}):
-        chosen = [c for c in corpus.split_clips("test") + corpus.split_clips("val")
-                  if c.num_people == 1 and c.meta.get("content") == label
-                  and c.num_frames > frames + 1][:clips]  # fmt: skip
-        if not chosen:
+        base = label_clips(corpus, ["test", "val"], label, frames, clips)
+        if base is None:
             continue
-        base = torch.stack([canonicalize_features(torch.from_numpy(corpus.clip_features(c))[0]
-                                                  .float()[:frames]) for c in chosen])  # fmt: skip
         for s in SHIFTS:
             held = torch.stack([shift_in_time(f, s) for f in base])
             pairs = zip(*(features_to_joints(x).numpy()

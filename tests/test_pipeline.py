@@ -605,11 +605,19 @@ def test_a_generated_person_1_starts_over_the_origin_with_pin_leader_start(train
     assert np.array_equal(on[1], off[1])
 
 
-def test_pin_leader_start_leaves_the_users_actor_alone(trained, bandai_clips):
+def test_pin_leader_start_leaves_react_scenes_unchanged(trained, bandai_clips):
+    """In react mode person 1 is the user's actor, placed where they are: the pin must not
+    move anybody, neither the actor nor the people placed beside them (whose warm start
+    reads the actor's pace, which no rigid shift changes)."""
     _, model, _ = trained
-    pipe = UMFPipeline.from_pretrained(model)
-    pipe.config.vae.pin_leader_start = True
     actor = next(c for c in bandai_clips if c.id == "dataset-1_bow_normal_001").joints[0][:61]
-    s = pipe("two people bow to each other", num_people=2, actor=actor, seed=0, fit=False,
-             separate=False)[0]  # fmt: skip
-    assert np.allclose(s.joints[0], actor[:60], atol=1e-5)
+
+    def scene(pin: bool) -> np.ndarray:
+        pipe = UMFPipeline.from_pretrained(model)
+        pipe.config.vae.pin_leader_start = pin
+        return pipe("two people bow to each other", num_people=3, actor=actor, seed=0,
+                    fit=False, separate=False)[0].joints  # fmt: skip
+
+    on = scene(True)
+    assert np.allclose(on[0], actor[:60], atol=1e-5)
+    assert np.array_equal(on, scene(False))

@@ -12,9 +12,10 @@ import pytest
 import torch
 
 from conftest import MODULE, FakeText, prepare_fixture_corpus, save_tiny_model
+from umf.data.relations import SIDE_MARGIN
 from umf.errors import UMFError
 from umf.pipeline import UMFPipeline
-from umf.reaction_bank import REACTIONS, SIDE_MARGIN, ReactionBank
+from umf.reaction_bank import REACTIONS, ReactionBank
 from umf.train.reactions import bank_lengths, build_reaction_bank
 
 pytestmark = pytest.mark.usefixtures("one_thread")

@@ -134,11 +134,9 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if sflow.warm_side and not (sflow.warm_proposal == "retrieved" and sflow.warm_shortlist):
             raise UMFError("sflow.warm_side needs sflow.warm_proposal 'retrieved' and "
                            "sflow.warm_shortlist > 0 (it narrows that shortlist)")  # fmt: skip
-        if sflow.warm_together and not (sflow.warm_start and sflow.warm_proposal == "retrieved"
-                                        and sflow.warm_pace):  # fmt: skip
-            raise UMFError("sflow.warm_together needs sflow.warm_start > 0, sflow.warm_proposal "
-                           "'retrieved' and sflow.warm_pace > 0 (it says whose pace that "
-                           "is)")  # fmt: skip
+        if sflow.warm_together and not (sflow.warm_proposal == "retrieved" and sflow.warm_pace):
+            raise UMFError("sflow.warm_together needs sflow.warm_proposal 'retrieved' and "
+                           "sflow.warm_pace > 0 (it says whose pace that is)")  # fmt: skip
         for name in ("warm_start", "own_warm"):
             if getattr(sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")

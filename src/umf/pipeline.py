@@ -364,12 +364,8 @@ class UMFPipeline:
         z = torch.stack(latents, dim=1)  # (B, N, p, r)
         check_finite(z, "the sampled latents (P-Flow / S-Flow output)")
         raw = self._decode_raw(z.flatten(0, 1), t).reshape(b, num_people, t, -1)
-        vae = self.config.vae  # person 1 and people 2..N fuse their floor paths differently
-        lead = fuse_positions(raw[:, :1], *vae.fusion_weights())
-        if vae.pin_leader_start:  # a user's actor replaces person 1 below, unmoved
-            lead = pin_floor_start(lead)
-        feats = torch.cat([lead, fuse_positions(raw[:, 1:], *vae.fusion_weights(reaction=True))],
-                          dim=1)  # fmt: skip
+        # person 1 and people 2..N fuse their paths differently; an actor replaces person 1
+        feats = torch.cat([self._fuse(raw[:, :1]), self._fuse(raw[:, 1:], reaction=True)], dim=1)
         if placed is not None:  # people 2..N back from person 1's re-centred frame
             back = zip(feats[:, 1:], placed, strict=True)
             feats[:, 1:] = torch.stack([transform_features(f, tf, inverse=True) for f, tf in back])
@@ -423,9 +419,12 @@ class UMFPipeline:
     def decode(self, z: torch.Tensor, num_frames: int, reaction: bool = False) -> torch.Tensor:
         """Latents (B, p, r) -> de-normalised features (B, T, 262). ``reaction``: people
         2..N (the S-Flow's), whose floor path may trust its decoded positions more
-        (``vae.reaction_root_fusion``): they are placed relative to person 1. Person 1's
-        path starts over the origin with ``vae.pin_leader_start``."""
-        raw = self._decode_raw(z, num_frames)
+        (``vae.reaction_root_fusion``): they are placed relative to person 1."""
+        return self._fuse(self._decode_raw(z, num_frames), reaction)
+
+    def _fuse(self, raw: torch.Tensor, reaction: bool = False) -> torch.Tensor:
+        """Decoded features (..., T, 262) fused (``fuse_positions``) at person 1's or people
+        2..N's weights; person 1 then starts over the origin with ``vae.pin_leader_start``."""
         out = fuse_positions(raw, *self.config.vae.fusion_weights(reaction))
         return pin_floor_start(out) if self.config.vae.pin_leader_start and not reaction else out
 

@@ -15,8 +15,7 @@ a person whose relation answers person 1 (a bow back, a response), how many fram
 person 1's their action starts in the whole scene (``lag_*``,
 :func:`umf.data.relations.action_onset`; 0 for everybody else), and where the person's
 pelvis starts on the floor, (x, z) in m in person 1's frame (``start_*``). They are derived
-from the
-training data and carry its licence.
+from the training data and carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
 
@@ -28,6 +27,7 @@ from pathlib import Path
 
 import torch
 
+from umf.data.relations import SIDE_MARGIN
 from umf.errors import UMFError
 from umf.flows.noise import Generators, randn
 from umf.io import save_tensors_atomic
@@ -46,11 +46,13 @@ START = "start_"
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
-# m to one side of person 1 under which a person stands on neither (the relation checks'
-# "side" margin, umf.data.relations.check)
-SIDE_MARGIN = 0.2
 
 Tensor = torch.Tensor
+
+
+def _per_length(raw: dict[str, Tensor], prefix: str) -> dict[int, Tensor]:
+    """The tensors of a bank file named ``prefix`` and a length, by length, in float."""
+    return {int(k.removeprefix(prefix)): v.float() for k, v in raw.items() if k.startswith(prefix)}
 
 
 @dataclass
@@ -109,10 +111,7 @@ class ReactionBank:
             return None
         try:
             raw = load_file(str(path))
-            latents = {int(k.removeprefix(PREFIX)): v.float() for k, v in raw.items()
-                       if k.startswith(PREFIX)}  # fmt: skip
-            texts = {int(k.removeprefix(TEXT)): v.float() for k, v in raw.items()
-                     if k.startswith(TEXT)}  # fmt: skip
+            latents, texts = _per_length(raw, PREFIX), _per_length(raw, TEXT)
             table = raw.get(CAPTIONS)
             for k, rows in raw.items():
                 if k.startswith(CAPTION) and k != CAPTIONS:
@@ -121,12 +120,8 @@ class ReactionBank:
                     if not fits or (rows < 0).any() or (len(rows) and rows.max() >= len(table)):
                         raise ValueError(f"{k} indexes no caption table")
                     texts[int(k.removeprefix(CAPTION))] = table[rows.long()].float()
-            velocities = {int(k.removeprefix(VELOCITY)): v.float() for k, v in raw.items()
-                          if k.startswith(VELOCITY)}  # fmt: skip
-            lags = {int(k.removeprefix(LAG)): v.float() for k, v in raw.items()
-                    if k.startswith(LAG)}  # fmt: skip
-            starts = {int(k.removeprefix(START)): v.float() for k, v in raw.items()
-                      if k.startswith(START)}  # fmt: skip
+            velocities, lags = _per_length(raw, VELOCITY), _per_length(raw, LAG)
+            starts = _per_length(raw, START)
         except (OSError, ValueError, RuntimeError, IndexError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -137,16 +132,13 @@ class ReactionBank:
             z = latents.get(frames)
             if z is None or e.ndim != 2 or len(e) != len(z) or not torch.isfinite(e).all():
                 raise UMFError(f"{path}: captions of {frames} frames do not match its reactions")
-        for name, table in (("velocities", velocities), ("starts", starts)):
+        for name, table, row in (("velocities", velocities, (2,)), ("starts", starts, (2,)),
+                                 ("lags", lags, ())):  # fmt: skip
             for frames, v in table.items():
                 z = latents.get(frames)
-                if z is None or v.shape != (len(z), 2) or not torch.isfinite(v).all():
+                if z is None or v.shape != (len(z), *row) or not torch.isfinite(v).all():
                     raise UMFError(f"{path}: {name} of {frames} frames do not match its "
                                    "reactions")  # fmt: skip
-        for frames, v in lags.items():
-            z = latents.get(frames)
-            if z is None or v.shape != (len(z),) or not torch.isfinite(v).all():
-                raise UMFError(f"{path}: lags of {frames} frames do not match its reactions")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
         return cls(latents, texts, velocities, lags, starts)

@@ -258,11 +258,8 @@ def pin_floor_start(features: Tensor) -> Tensor:
     (a generated runner's positions travel half as far as its legs), the average leaves
     the start a metre or more from the origin, and people placed relative to it out of
     place. Velocities and everything else are unchanged."""
-    pos = features[..., POS].reshape(*features.shape[:-1], NUM_JOINTS, 3)
-    shift = torch.zeros_like(pos[..., :1, :1, :])
-    shift[..., [0, 2]] = pos[..., :1, :1, [0, 2]]
-    pos = pos - shift
-    return torch.cat([pos.reshape(*features.shape[:-1], 66), features[..., VEL.start :]], dim=-1)
+    start = features[..., 0, POS][..., [0, 2]]  # (..., 2): the first-frame pelvis on the floor
+    return place_features(features, 0.0, -start[..., 0], -start[..., 1])
 
 
 def features_to_local_rotations(features: Tensor) -> Tensor:
@@ -332,8 +329,10 @@ class Normalizer:
         return cls(d["mean"], d["std"])
 
 
-def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) -> Tensor:
-    """Turn people about +Y by ``yaw`` (rad) around the origin, then move them by (dx, dz).
+def place_features(features: Tensor, yaw: float | Tensor, dx: float | Tensor,
+                   dz: float | Tensor) -> Tensor:  # fmt: skip
+    """Turn people about +Y by ``yaw`` (rad) around the origin, then move them by (dx, dz):
+    numbers, or tensors of the leading shape (...,) for one move per row.
 
     Only positions and velocities change: local rotations exclude the root and contacts
     depend on heights and speeds, both invariant to a rigid motion on the floor. Same
@@ -342,7 +341,8 @@ def place_features(features: Tensor, yaw: float | Tensor, dx: float, dz: float) 
     """
     lead = features.shape[:-1]
     rot = yaw_matrix(torch.as_tensor(yaw, dtype=features.dtype)).to(features.device)
-    shift = torch.tensor([dx, 0.0, dz], dtype=features.dtype, device=features.device)
+    dx, dz = (torch.as_tensor(v, dtype=features.dtype, device=features.device) for v in (dx, dz))
+    shift = torch.stack([dx, torch.zeros_like(dx), dz], dim=-1)[..., None, None, :]
     pos = features[..., POS].reshape(*lead, 22, 3) @ rot.T + shift
     vel = features[..., VEL].reshape(*lead, 22, 3) @ rot.T
     return torch.cat(

@@ -56,10 +56,10 @@ from typing import Any
 import torch
 
 from umf.config import MULTI_PERSON, SINGLE_PERSON
-from umf.data.relations import ONSET_SMOOTHING, action_onset
+from umf.data.relations import ONSET_SMOOTHING, SIDE_MARGIN, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
-from umf.reaction_bank import REACTIONS, SIDE_MARGIN
+from umf.reaction_bank import REACTIONS
 from umf.representation import (
     features_to_joints,
     hold_to_length,
@@ -113,10 +113,16 @@ def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
     return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
 
 
+def floor_start(features: Tensor) -> Tensor:
+    """(B, 2) the pelvis's first-frame floor position (x, z) in m, for features (B, T, 262),
+    in their frame: for people 2..N, person 1's (+x: person 1's left)."""
+    return features_to_joints(features[:, :1])[:, 0, 0][:, [0, 2]]
+
+
 def start_side(features: Tensor) -> Tensor:
     """(B,) +1 where a person 2..N (features (B, T, 262), person 1's frame) starts more than
     ``SIDE_MARGIN`` to person 1's left (+x), -1 to the right, 0 in between."""
-    x = features_to_joints(features[:, :1])[:, 0, 0, 0]
+    x = floor_start(features)[:, 0]
     return torch.sign(x) * (x.abs() > SIDE_MARGIN)
 
 

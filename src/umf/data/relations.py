@@ -20,6 +20,7 @@ from umf.skeleton import FACE_JOINTS
 FACING_TOLERANCE_DEG = 45.0
 SAME_HEADING_TOLERANCE_DEG = 35.0
 CONTACT_DISTANCE = 0.25  # m between any two joints of different people: closer counts as contact
+SIDE_MARGIN = 0.2  # m to one side of a person under which another stands on neither side
 
 
 @dataclass(frozen=True)
@@ -168,7 +169,7 @@ def check(joints: np.ndarray, c: dict[str, Any]) -> CheckResult:
         return CheckResult(kind, (a, b), ok, d, f"P{a}-P{b} {d:.2f} m in [{c['min']}, {c['max']}]")
     if kind == "side":
         left, _ = lateral_offset(joints, a, b, frame)
-        ok = left > 0.2 if c["side"] == "left" else left < -0.2
+        ok = left > SIDE_MARGIN if c["side"] == "left" else left < -SIDE_MARGIN
         return CheckResult(kind, (a, b), ok, left, f"P{b} on P{a}'s {c['side']}: {left:+.2f} m")
     if kind == "order":  # a is ahead of b along a's heading
         _, fwd = lateral_offset(joints, a, b, frame)

@@ -14,9 +14,8 @@ from umf.coverage import embed
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
-from umf.representation import features_to_joints
 from umf.train.datasets import SceneDataset
-from umf.warm_start import floor_velocity, onsets
+from umf.warm_start import floor_start, floor_velocity, onsets
 
 STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
 
@@ -89,7 +88,7 @@ def build_reaction_bank(
         lags[frames] = torch.tensor([lag[i] for i in keep], dtype=torch.float32)
         real = pipe.normalizer.denormalize(x.cpu())
         velocities[frames] = floor_velocity(real, pipe.config.fps)
-        starts[frames] = features_to_joints(real[:, :1])[:, 0, 0][:, [0, 2]]
+        starts[frames] = floor_start(real)
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
     if not latents:

@@ -578,10 +578,9 @@ def give_reactions(out: Path, corpus_dir: Path, base: Path, own_vae: bool, progr
         return
     config = json.loads((out / "config.json").read_text())
     config["sflow"]["warm_start"] = 0.0
-    config["sflow"]["warm_together"] = 0.0  # a part of the warm start: off with it
     write_json_atomic(out / "config.json", config)
     log("reactions: none to retrieve, so the exported model samples without the warm start "
-        "(sflow.warm_start=0, sflow.warm_together=0)")  # fmt: skip
+        "(sflow.warm_start=0)")  # fmt: skip
 
 
 def write_vocabulary(model: Path, corpus_dir: Path, threshold: float | None = None):
