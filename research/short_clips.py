@@ -3,11 +3,11 @@
 A clip shorter than the shortest crop (``--min-frames`` feature frames) is held in its last
 pose (ends at rest), has its last cycle repeated (ends in a steady, straight gait), is eased
 to a stop and held (ends slowly; only with ``--settle``, as ``train_*.settle``) or is
-served as it is (``umf.train.extension.extension_period``, the dataset's own choice). Prints
+served as it is (``umf.data.extension.extension_period``, the dataset's own choice). Prints
 one row per content label, then the seam and turn of the repeated cycles
-(``umf.train.extension.last_cycle``), the median length of each label's short clips, and
+(``umf.data.extension.last_cycle``), the median length of each label's short clips, and
 for every short clip eased or served as it is the speeds that kept it from being held
-(``umf.train.extension.end_speeds``: pelvis, left ankle and toe, right ankle and toe).
+(``umf.data.extension.end_speeds``: pelvis, left ankle and toe, right ankle and toe).
 
     python research/short_clips.py [--corpus out/corpus] [--split train] [--min-frames 140]
         [--settle]
@@ -21,7 +21,7 @@ from collections import Counter, defaultdict
 
 import numpy as np
 
-from umf.train.extension import (
+from umf.data.extension import (
     REST_SPEED,
     SETTLE,
     SETTLE_SPEED,

@@ -608,3 +608,33 @@ def test_stand_keeps_each_rows_reaction_on_its_side_of_person_1(tmp_path):
     ReactionBank({30: latents}, starts={30: starts[:, :1]}).save(tmp_path)
     with pytest.raises(UMFError, match="starts of 30 frames"):
         ReactionBank.load(tmp_path)
+
+
+def test_avoid_keeps_a_reaction_off_where_someone_already_starts():
+    """``pick(avoid=)``: only reactions starting at least ``SPOT`` from every point of the
+    row's ``avoid`` compete, before the side; a row with none free keeps every candidate;
+    an empty ``avoid`` changes nothing."""
+    from umf.reaction_bank import SPOT
+
+    g = torch.Generator().manual_seed(5)
+    latents = torch.randn(6, P, R, generator=g)
+    # left 0.9 (the nearest to the queries), left 1.0, right -0.9, ahead 2.5 ...
+    starts = torch.tensor([[0.9, 0.0], [1.0, 0.2], [-0.9, 0.0], [0.0, 2.5], [2.0, 0.0],
+                           [-1.0, 0.1]])  # fmt: skip
+    bank = ReactionBank({30: latents}, starts={30: starts})
+    query = latents[:1].expand(2, -1, -1) + 0.01
+    assert bank.pick(query, 30, 1)[1].tolist() == [0, 0]
+    person2 = torch.tensor([[[0.95, 0.1]], [[5.0, 5.0]]])  # row 2's person 2 is far away
+    idx = bank.pick(query, 30, 1, avoid=person2)[1].tolist()
+    assert idx[1] == 0
+    assert float(torch.dist(starts[idx[0]], person2[0, 0])) >= SPOT
+    # with the left asked, a free reaction on the left (2 m out) is taken
+    assert bank.pick(query[:1], 30, 1, stand=torch.tensor([1.0]), avoid=person2[:1])[1] == 4
+    # the right asked: only the right's reactions, both free
+    right = bank.pick(query[:1], 30, 6, torch.Generator().manual_seed(0),
+                      stand=torch.tensor([-1.0]), avoid=person2[:1])[1]  # fmt: skip
+    assert int(right) in (2, 5)
+    everywhere = torch.tensor([[[float(x), float(z)] for x, z in starts]])  # nobody free
+    assert bank.pick(query[:1], 30, 1, avoid=everywhere)[1].tolist() == [0]
+    empty = torch.zeros(2, 0, 2)
+    assert bank.pick(query, 30, 1, avoid=empty)[1].tolist() == [0, 0]

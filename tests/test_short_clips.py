@@ -5,9 +5,9 @@ from __future__ import annotations
 import sys
 
 from conftest import load_script, prepare_fixture_corpus
+from umf.data import extension as E
 from umf.data.corpus import Corpus
 from umf.train import datasets as D
-from umf.train import extension as E
 
 
 def test_short_clips_agrees_with_the_dataset(tmp_path, monkeypatch, capsys):

@@ -6,6 +6,7 @@ import pytest
 import torch
 
 from conftest import prepare_fixture_corpus
+from umf.data import extension as E
 from umf.data.corpus import Corpus
 from umf.data.scenes import yaw_rotate
 from umf.errors import UMFError
@@ -23,7 +24,6 @@ from umf.representation import (
 )
 from umf.train import batching as B
 from umf.train import datasets as D
-from umf.train import extension as E
 
 
 @pytest.fixture(scope="module")

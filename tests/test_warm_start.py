@@ -443,3 +443,99 @@ def test_start_side_reads_the_first_frames_pelvis_beyond_the_side_margin():
         f[:, rep.POS] += torch.tensor([x + 0.2, 0.0, 0.0], dtype=f.dtype).repeat(22)
         walks.append(f)
     assert start_side(torch.stack(walks)).tolist() == [1.0, -1.0, 0.0, 0.0]
+
+
+def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
+    """With ``sflow.warm_play`` a row travelling with person 1 takes its retrieved reaction
+    played at person 1's pace (rate: the leader's speed over the decoded reaction's) and
+    fits, however slow the reaction; a row not travelling with person 1 keeps its latent."""
+    import umf.warm_start
+    from umf.reaction_bank import ReactionBank
+    from umf.warm_start import proposal
+
+    pipe = models["warm"]
+    first = torch.zeros(2, *pipe.vae.latent_shape)
+    decoded = pipe.decode(first, 30, reaction=True)
+    leader = decoded.flip(0)
+    speeds = {"own": torch.tensor([[0.0, 1.0], [0.0, -1.0]]),  # row 1 walks the other way
+              "lead": torch.tensor([[0.0, 2.5], [0.0, 2.5]])}  # fmt: skip
+
+    def velocity(f, fps):
+        if f is decoded:
+            return speeds["own"]
+        if f is leader:
+            return speeds["lead"]
+        return torch.tensor([[0.0, 1.6]] * len(f))  # the retrieved reaction, decoded
+
+    monkeypatch.setattr(umf.warm_start, "floor_velocity", velocity)
+    rates = []
+
+    def spy(features, rate):
+        rates.append(rate.clone())
+        return features + 1.0  # a motion other than the reaction's
+
+    monkeypatch.setattr(umf.warm_start, "play_at", spy)
+    bank = ReactionBank({30: first[:1] + 0.5}, velocities={30: torch.tensor([[0.0, 1.0]])})
+    text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
+    cfg = pipe.config.sflow
+    old = (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
+           cfg.warm_play, pipe.reactions)  # fmt: skip
+    try:
+        cfg.warm_pace, cfg.warm_proposal, cfg.warm_neighbours = 0.1, "retrieved", 1
+        cfg.warm_together, pipe.reactions = 0.8, bank
+
+        def run(play: bool):
+            cfg.warm_play = play
+            gens = [torch.Generator().manual_seed(s) for s in range(2)]
+            return proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
+
+        z, _, fits, _ = run(False)
+        assert fits.tolist() == [False, False] and not rates  # 1.0 m/s is no leader's pace
+        z, _, fits, _ = run(True)
+        assert fits.tolist() == [True, False]
+        (rate,) = rates
+        torch.testing.assert_close(rate, torch.tensor([2.5 / 1.6]))
+        assert torch.equal(z[1], bank.latents[30][0])  # not with the leader: as retrieved
+        assert not torch.allclose(z[0], bank.latents[30][0])
+    finally:
+        (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
+         cfg.warm_play, pipe.reactions) = old  # fmt: skip
+
+
+def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch):
+    """With ``sflow.warm_apart`` the proposal for person k >= 3 gets where people 2..k - 1
+    start (person 1's frame, as decoded from the context), person 2's gets nothing; without
+    it nobody's does."""
+    import umf.warm_start
+
+    pipe = models["warm"]
+    seen = []
+    real = umf.warm_start.proposal
+
+    def spy(p, first, decoded, *args, others=None, **kwargs):
+        seen.append(None if others is None else others.clone())
+        return real(p, first, decoded, *args, others=others, **kwargs)
+
+    monkeypatch.setattr(umf.warm_start, "proposal", spy)
+    _scene(pipe, people=3)
+    assert seen == [None, None]
+    cfg = pipe.config.sflow
+    try:
+        cfg.warm_apart = True
+        scene = _scene(pipe, people=4)
+    finally:
+        cfg.warm_apart = False
+    assert seen[2] is None and seen[3].shape == (1, 1, 2) and seen[4].shape == (1, 2, 2)
+    assert torch.isfinite(seen[4]).all()
+    assert np.isfinite(scene.joints).all()
+
+
+def test_warm_play_and_apart_need_what_they_narrow():
+    from conftest import tiny_config
+    from umf.config import set_option
+    from umf.model_checks import check_config_values
+
+    with pytest.raises(UMFError, match="warm_play needs"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_play=true"))
+    with pytest.raises(UMFError, match="warm_apart needs"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_apart=true"))

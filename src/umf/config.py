@@ -230,6 +230,16 @@ class SFlowConfig:
     # compares the bank with person 1's velocity instead: people walking or running together
     # keep the leader's pace and heading, where the first pass lags and drifts outwards
     warm_together: float = 0.0
+    # with warm_together: the reaction retrieved for a row travelling with person 1 is played
+    # at person 1's pace (umf.data.extension.played_at: resampled in time, its gait carried
+    # on) and taken whatever its own pace: the bank's real partners are slower than the
+    # P-Flow's runners, and within warm_pace a partner 15 % slow still fits
+    warm_play: bool = False
+    # person k >= 3 retrieves among the reactions that start at least umf.reaction_bank.SPOT
+    # from where people 2..k - 1 start, on the other side of person 1 where theirs is taken:
+    # the S-Flow, trained on pairs, puts every added person where it would put a partner of
+    # person 1 (results/reactions-20261208)
+    warm_apart: bool = False
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
     # as near it as its mirror image (side words swapped): people on the side it names
@@ -335,20 +345,20 @@ class TrainConfig:
     # and only from clips whose metadata match these "key=value" pairs (e.g. style=normal)
     caption_mix_from: tuple[str, ...] = ()
     # single-person clips shorter than min_frames whose body ends at rest are held in their
-    # last pose up to a full crop (umf.train.extension.ends_at_rest): the flow learns that a
+    # last pose up to a full crop (umf.data.extension.ends_at_rest): the flow learns that a
     # gesture ends standing, not what the latent of absent frames decodes to
     hold_rest: bool = False
     # and those that end in a steady, straight gait repeat their last cycle up to a full crop
-    # (umf.train.extension.gait_period): a 4 s run keeps running instead of slowing to a glide
+    # (umf.data.extension.gait_period): a 4 s run keeps running instead of slowing to a glide
     repeat_gait: bool = False
     # scene batches: and composed scenes shorter than min_frames whose people travel together
     # and all end in a steady gait, where their relation still holds
-    # (umf.train.extension.scene_gait_periods): a 4 s run side by side at a sprint, which
+    # (umf.data.extension.scene_gait_periods): a 4 s run side by side at a sprint, which
     # Bandai's short runs never composed
     repeat_scene_gait: bool = False
     # and those that end neither, but slowly (every end speed under 1 m/s: a getup cut while
     # the pelvis still rises), are eased to a stop over their last frames, then held
-    # (umf.train.extension.settle_times): a 4 s "get up" ends standing instead of bending again
+    # (umf.data.extension.settle_times): a 4 s "get up" ends standing instead of bending again
     settle: bool = False
     # VAE only: train the decoder and hold the encoder (and so every latent, and the flows
     # trained on them) fixed; needs a VAE to start from (`umf train vae --init MODEL`)

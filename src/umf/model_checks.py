@@ -137,6 +137,12 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if sflow.warm_together and not (sflow.warm_proposal == "retrieved" and sflow.warm_pace):
             raise UMFError("sflow.warm_together needs sflow.warm_proposal 'retrieved' and "
                            "sflow.warm_pace > 0 (it says whose pace that is)")  # fmt: skip
+        if sflow.warm_play and not sflow.warm_together:
+            raise UMFError("sflow.warm_play needs sflow.warm_together > 0 (it plays the "
+                           "reactions that travel with person 1 at person 1's pace)")  # fmt: skip
+        if sflow.warm_apart and sflow.warm_proposal != "retrieved":
+            raise UMFError("sflow.warm_apart needs sflow.warm_proposal 'retrieved' (it "
+                           "narrows the reactions retrieved)")  # fmt: skip
         for name in ("warm_start", "own_warm"):
             if getattr(sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")

@@ -46,6 +46,10 @@ START = "start_"
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
+# m between two people's first-frame pelvises under which a reaction starts where someone
+# already stands: real partners side by side start 0.7-1.1 m from person 1, so two of them
+# on one side start closer than this (sflow.warm_apart)
+SPOT = 0.8
 
 Tensor = torch.Tensor
 
@@ -175,6 +179,16 @@ class ReactionBank:
         chosen = torch.zeros(sims.shape, dtype=torch.bool, device=sims.device)
         return chosen.scatter(1, keep, True) & torch.isfinite(sims)
 
+    def _free(self, length: int, avoid: Tensor, allowed: Tensor | None) -> Tensor:
+        """``allowed`` (B, N) (None: every reaction) narrowed to the reactions that start at
+        least ``SPOT`` from every point of ``avoid`` (B, M, 2); a row with none keeps what it
+        had."""
+        start = self.starts[length].to(avoid)  # (N, 2)
+        free = (torch.cdist(avoid, start[None].expand(len(avoid), -1, -1)) >= SPOT).all(dim=1)
+        rest = torch.ones_like(free) if allowed is None else allowed
+        free = free & rest
+        return torch.where(free.any(dim=1, keepdim=True), free, rest)
+
     def _on_side(self, length: int, stand: Tensor, allowed: Tensor | None) -> Tensor | None:
         """``allowed`` (B, N) (None: every reaction) narrowed, for the rows whose ``stand``
         (B,) is +1 or -1, to the reactions starting more than ``SIDE_MARGIN`` to that side of
@@ -236,6 +250,7 @@ class ReactionBank:
         pace: float = 0.0,
         mirror: Tensor | None = None,
         stand: Tensor | None = None,
+        avoid: Tensor | None = None,
     ) -> tuple[int, Tensor, Tensor]:
         """For each row of ``query`` (B, p, r) a real reaction: the stored length it is of, its
         index (B,) there and (B,) whether the row had one at its pace. The reaction is one of the
@@ -253,7 +268,10 @@ class ReactionBank:
         prompt naming a side retrieves people on that side (a prompt naming none is its own
         mirror image: no change). ``stand`` (B,): +1 or -1 for a row whose reaction must
         start on person 1's left (+x) or right, 0 for any side (a bank without starts, or a
-        row with no reaction on its side, ignores it). Whether each row had one within its
+        row with no reaction on its side, ignores it). ``avoid`` (B, M, 2): where people
+        already in each row's scene start on the floor (x, z in person 1's frame); only the
+        reactions starting at least ``SPOT`` from all of them compete (a row with none keeps
+        what it had). Whether each row had one within its
         pace is all True without a pace, so a caller can keep what it had rather than take a
         reaction at the wrong pace."""
         length = self.bucket(frames)
@@ -261,6 +279,8 @@ class ReactionBank:
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
         listed = self._shortlisted(length, prompt, shortlist, d, mirror)
         allowed = listed
+        if avoid is not None and avoid.shape[1] and length in self.starts:
+            allowed = self._free(length, avoid.to(d), allowed)
         if stand is not None and length in self.starts:
             allowed = self._on_side(length, stand.to(d), allowed)
         if allowed is not None:

@@ -56,13 +56,17 @@ from typing import Any
 import torch
 
 from umf.config import MULTI_PERSON, SINGLE_PERSON
+from umf.data.extension import played_at
 from umf.data.relations import ONSET_SMOOTHING, SIDE_MARGIN, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
-from umf.reaction_bank import REACTIONS
+from umf.reaction_bank import REACTIONS, SPOT
 from umf.representation import (
+    assemble_features,
     features_to_joints,
+    features_to_joints_integrated,
     hold_to_length,
+    joints_to_rot6d,
     leader_frame,
     shift_in_time,
     transform_features,
@@ -113,6 +117,35 @@ def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
     return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
 
 
+def play_at(features: Tensor, rate: Tensor) -> Tensor:
+    """Features (B, T, 262) played ``rate`` (B,) times as fast (:func:`played_at`: clamped
+    to a fifth slower and a quarter faster, the gait carried on past the end), rotations
+    recovered from the played joints."""
+    t, out = features.shape[1], []
+    for f, r in zip(features, rate.tolist(), strict=True):
+        joints = features_to_joints_integrated(f.detach()).double().cpu().numpy()  # T + 1
+        played = torch.from_numpy(played_at(joints, r, t + 1)).to(features.dtype)
+        out.append(assemble_features(played, joints_to_rot6d(played)))
+    return torch.stack(out).to(features.device)
+
+
+def taken_sides(stand: Tensor, others: Tensor) -> Tensor:
+    """``stand`` (B,) (+1 left of person 1, -1 right, 0 either) turned to the other side
+    where one of ``others`` (B, M, 2: where people 2..k - 1 start, person 1's frame) already
+    starts on it and none on the other: person k of a row of three beside person 1."""
+    x = others[..., 0]
+    taken = torch.sign(x) * (x.abs() > SIDE_MARGIN)  # (B, M)
+    mine = (taken == stand[:, None]).any(dim=1) & (stand != 0)
+    theirs = (taken == -stand[:, None]).any(dim=1)
+    return torch.where(mine & ~theirs, -stand, stand)
+
+
+def crowded(features: Tensor, others: Tensor) -> Tensor:
+    """(B,) whether each row of ``features`` (B, T, 262) starts within ``SPOT`` of one of
+    ``others`` (B, M, 2): where people 2..k - 1 start."""
+    return (torch.cdist(floor_start(features)[:, None], others)[:, 0] < SPOT).any(dim=-1)
+
+
 def floor_start(features: Tensor) -> Tensor:
     """(B, 2) the pelvis's first-frame floor position (x, z) in m, for features (B, T, 262),
     in their frame: for people 2..N, person 1's (+x: person 1's left)."""
@@ -149,6 +182,7 @@ def proposal(
     mirror: Any = None,
     answers_first: bool = True,
     leader: Tensor | None = None,
+    others: Tensor | None = None,
 ) -> tuple[Tensor, int, Tensor, tuple[Tensor, list[int]] | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
@@ -161,7 +195,9 @@ def proposal(
     a prompt names; ``answers_first`` False: no answer is looked for (a re-rolled person 1);
     ``leader`` (B, T, 262): person 1 as the pipeline decodes them (for a re-rolled person 1,
     person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
-    their first pass's side."""
+    their first pass's side (played at it with ``sflow.warm_play``); ``others`` (B, M, 2):
+    where people 2..k - 1 start (``sflow.warm_apart``), whose spots and sides the row's
+    reaction keeps off."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -184,11 +220,13 @@ def proposal(
         # side since 20261208, more surely than warm_side's caption shortlist, which also
         # holds reactions whose captions name none (results/umf-small-bandai-20261211)
         stand = None if together is None else start_side(decoded) * together
+        if stand is not None and others is not None:
+            stand = taken_sides(stand, others)
         bank, frames = pipe.reactions, decoded.shape[1]
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
-                                      side, stand)  # fmt: skip
+                                      side, stand, others)  # fmt: skip
         z, waits = bank.latents[length].to(first)[idx], None
         if together is not None and length in bank.velocities:
             # beside a leader, a reaction nearer the leader's pace than the first pass fits,
@@ -196,9 +234,18 @@ def proposal(
             got = bank.velocities[length].to(velocity)[idx]
             nearer = (got - velocity).norm(dim=-1) < (own_pace - velocity).norm(dim=-1)
             fits = fits | (together & nearer)
+        if cfg.warm_play and together is not None and bool(together.any()):
+            # at person 1's pace, whatever the reaction's own: it fits
+            rows = together.nonzero().flatten()
+            reaction = pipe.decode(z[rows], frames, reaction=True)
+            own = floor_velocity(reaction, fps).norm(dim=-1).clamp_min(MOVING)
+            played = play_at(reaction, velocity[rows].norm(dim=-1) / own)
+            z, fits = z.clone(), fits | together
+            z[rows] = pipe._encode(played).to(z)
         if answers_first and bank.lags and cfg.warm_timing > 0:
             z, lag, stored = answers(bank, first, frames, z, cfg, generator,
-                                     pipe.sflow.latent_norm.normalize, prompt)  # fmt: skip
+                                     pipe.sflow.latent_norm.normalize, prompt,
+                                     others)  # fmt: skip
             waits = (lag, stored)
         return z, 0, fits, waits
     z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
@@ -206,7 +253,8 @@ def proposal(
 
 
 def answers(bank: Any, first: Tensor, frames: int, z: Tensor, cfg: Any, generator: Any,
-            scale: Any, prompt: Tensor) -> tuple[Tensor, Tensor, list[int]]:  # fmt: skip
+            scale: Any, prompt: Tensor,
+            others: Tensor | None = None) -> tuple[Tensor, Tensor, list[int]]:  # fmt: skip
     """The retrieved reactions ``z`` (B, p, r) with their waits (B,), for a warm start that
     retimes answers (``sflow.warm_timing`` w > 0). A row answers when the reactions of its
     prompt's nearest caption waited a median of at least w frames
@@ -227,7 +275,8 @@ def answers(bank: Any, first: Tensor, frames: int, z: Tensor, cfg: Any, generato
             continue
         gen = generator[i] if isinstance(generator, list | tuple) else generator
         _, idx, _ = bank.pick(first[i : i + 1], length, cfg.warm_neighbours, gen, scale,
-                              prompt[i : i + 1], int(found[1][0]))  # fmt: skip
+                              prompt[i : i + 1], int(found[1][0]),
+                              avoid=None if others is None else others[i : i + 1])  # fmt: skip
         z[i] = bank.latents[length].to(z)[idx[0]]
         waits[i], stored[i] = bank.lag(length, idx)[0], length
     return z, waits, stored
@@ -373,12 +422,20 @@ def sample_added(
         # person 1 (for a re-rolled person 1, person 2: the one they keep pace with)
         leader = (pipe.decode(prev[:, 0], frames, reaction=not answers_first)
                   if cfg.warm_together > 0 else None)  # fmt: skip
+        others = None  # where people 2..k - 1 start, for person k >= 3 (sflow.warm_apart)
+        if cfg.warm_apart and prev.shape[1] > 1:
+            b, n = prev.shape[:2]
+            there = pipe.decode(prev[:, 1:].flatten(0, 1), frames, reaction=True)
+            others = floor_start(there).reshape(b, n - 1, 2)
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
-                                       answers_first=answers_first, leader=leader)  # fmt: skip
+                                       answers_first=answers_first, leader=leader,
+                                       others=others)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer
+        if others is not None:  # a first pass on someone's spot is sampled again, gliding or not
+            take = take | (fits & crowded(decoded, others))
         w = torch.where(take[:, None, None], again, w)
     return w, nfe

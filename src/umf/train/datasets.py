@@ -11,7 +11,7 @@ Frames of reference (decided here, used by every stage):
   encode person 2..N too, who start anywhere facing anywhere.
 * Short clips: a single-person clip shorter than the shortest crop is served whole and
   then extended where that can be done truthfully (``hold_rest``, ``repeat_gait``,
-  ``settle``: :mod:`umf.train.extension`), else as it is.
+  ``settle``: :mod:`umf.data.extension`), else as it is.
 * Mirroring (p = 0.5) flips the motion left/right and swaps the side words of the caption
   (:func:`mirror_caption`); a canonical crop stays canonical when mirrored.
 
@@ -34,6 +34,13 @@ from torch.utils.data import Dataset
 from umf.config import MULTI_PERSON, SINGLE_PERSON, metadata_pairs
 from umf.data.clip import MotionClip
 from umf.data.corpus import Corpus
+from umf.data.extension import (
+    SETTLE,
+    extend_person,
+    extend_scene,
+    extension_period,
+    scene_gait_periods,
+)
 from umf.data.scenes import build_scene, scene_features_of, scene_rotations
 from umf.errors import UMFError
 from umf.representation import (
@@ -47,13 +54,6 @@ from umf.representation import (
 )
 from umf.text import mirror_caption, swap_words, word_pattern
 from umf.train.batching import collate_scenes, collate_single
-from umf.train.extension import (
-    SETTLE,
-    extend_person,
-    extend_scene,
-    extension_period,
-    scene_gait_periods,
-)
 
 Tensor = torch.Tensor
 
@@ -419,7 +419,7 @@ class SceneDataset(_EpochDataset):
     together and all end in a steady gait, and whose relation still holds when they go on,
     is served from its start at a crop length from ``min_frames`` to ``max_frames``, each
     person's last cycle repeated
-    (:func:`umf.train.extension.scene_gait_periods`); ``extended`` maps its id to the periods.
+    (:func:`umf.data.extension.scene_gait_periods`); ``extended`` maps its id to the periods.
     """
 
     def __init__(

@@ -234,3 +234,24 @@ def extend_scene(
     out = [extend_person(j, r, start, stop, p)
            for j, r, p in zip(joints, rot6d, periods, strict=True)]  # fmt: skip
     return np.stack([j for j, _ in out]), np.stack([r for _, r in out])
+
+
+# a gait played at most this much faster or slower still looks like a gait (cadence and stride
+# together): a runner's pace in the training crops spans 1.9-3.1 m/s
+PLAY_FASTEST = 1.25
+PLAY_SLOWEST = 0.8
+
+
+def played_at(joints: np.ndarray, rate: float, frames: int) -> np.ndarray:
+    """``frames`` frames of one person's joints (T, 22, 3) played ``rate`` times as fast
+    (clamped to [:data:`PLAY_SLOWEST`, :data:`PLAY_FASTEST`]): resampled in time from the
+    first frame, and where that needs frames past the end, its last cycle repeated on along
+    its path (:func:`extend_joints`; the cycle :func:`last_cycle` finds, steady or not).
+    A partner who walks beside a leader faster than every real partner on record."""
+    j = np.asarray(joints, dtype=np.float64)
+    rate = float(np.clip(rate, PLAY_SLOWEST, PLAY_FASTEST))
+    times = np.arange(frames) * rate
+    need = int(np.ceil(times[-1])) + 2 if frames else 0
+    if need > len(j):
+        j = extend_joints(j, 0, need, last_cycle(j)[0] or 0)
+    return interpolate_frames(j, times).astype(np.asarray(joints).dtype)
