@@ -49,7 +49,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261211"
+NAME = "umf-small-bandai-20261212"
 PLACE_WEIGHT = 0.1
 
 
@@ -159,7 +159,8 @@ NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_s
          "sflow.warm_proposal=retrieved", "sflow.warm_glide=0.3", "sflow.warm_pace=0.15",
          "sflow.warm_shortlist=64", "pflow.person_composition=and",
          "sflow.own_warm=0.5", "sflow.warm_side=true", "sflow.warm_timing=8",
-         "sflow.warm_together=0.8", "vae.pin_leader_start=true"]  # fmt: skip
+         "sflow.warm_together=0.8", "vae.pin_leader_start=true", "sflow.warm_play=true",
+         "sflow.warm_apart=true"]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -266,7 +267,9 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     # people 2..N warm-started from the P-Flow's motion for their prompt;
     # results/umf-small-bandai-20261210: an answer retrieved from the bank waits as long
     # after person 1 as it did in its scene; results/umf-small-bandai-20261211: person 1's
-    # fused path starts over the origin, and people travelling with them keep their pace
+    # fused path starts over the origin, and people travelling with them keep their pace;
+    # results/umf-small-bandai-20261212: their partner is played at their pace, and person
+    # k >= 3 starts off the spots (and sides) of people 2..k - 1
     name = variant("name", work / "runs" / "gait" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]
