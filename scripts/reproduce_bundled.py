@@ -269,7 +269,7 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     # after person 1 as it did in its scene; results/umf-small-bandai-20261211: person 1's
     # fused path starts over the origin, and people travelling with them keep their pace;
     # results/umf-small-bandai-20261212: their partner is played at their pace, and person
-    # k >= 3 starts off the spots (and sides) of people 2..k - 1
+    # k >= 3 keeps off the spots of people 2..k - 1
     name = variant("name", work / "runs" / "gait" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]

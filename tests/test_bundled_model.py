@@ -215,7 +215,7 @@ def test_runners_keep_pace_with_their_leader(pipe):
     the 8 seeds. 20261211 kept 5 and 5: the bank's real partners run slower than the
     P-Flow's leaders, and a third runner started on the second one's spot; 20261212 plays
     the partner at the leader's pace (``sflow.warm_play``) and keeps person 3 off person 2's
-    side (``sflow.warm_apart``): 7 and 7 (results/umf-small-bandai-20261212)."""
+    spot (``sflow.warm_apart``): 7 and 7 (results/umf-small-bandai-20261212)."""
     fps = pipe.config.fps
     for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
         missed = []
@@ -228,6 +228,25 @@ def test_runners_keep_pace_with_their_leader(pipe):
             if (np.abs(speed[1:] / speed[0] - 1.0) > 0.2).any() or (behind > 1.0).any():
                 missed.append((seed, np.round(speed[1:] / speed[0], 2), np.round(behind, 2)))
         assert len(missed) <= 1, (prompt, missed)
+
+
+def test_people_3_to_n_start_off_the_spots_of_those_before_them(pipe):
+    """Raw (no separation), seeds 0-3: in an audience, a single file and a row of three the
+    closest two first-frame pelvises are at least 0.5 m apart, 0.8 m at the median.
+    20261211 put everyone after person 2 where person 2 stood (audience 0.07-0.27 m, single
+    file 0.11-1.01); 20261212's ``sflow.warm_apart`` gives 0.66-1.39 and 0.57-1.59
+    (results/umf-small-bandai-20261212)."""
+    for prompt, n in (("A person bows to three people, who bow back.", 4),
+                      ("Four people walk in single file.", 4),
+                      ("Three people walk side by side.", 3)):  # fmt: skip
+        gaps = []
+        for seed in range(4):
+            (scene,) = pipe(prompt, num_people=n, seconds=4.0, seed=seed, fit=False,
+                            separate=False)  # fmt: skip
+            p = np.asarray(scene.joints)[:, 0, 0][:, [0, 2]]
+            gaps.append(min(float(np.linalg.norm(p[i] - p[k])) for k in range(1, n)
+                            for i in range(k)))  # fmt: skip
+        assert min(gaps) >= 0.5 and float(np.median(gaps)) >= 0.8, (prompt, gaps)
 
 
 def test_a_bow_back_waits_for_the_bow(pipe):

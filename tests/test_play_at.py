@@ -9,7 +9,7 @@ import torch
 
 from umf.data import extension as E
 from umf.representation import assemble_features, features_to_joints, joints_to_rot6d
-from umf.warm_start import play_at, taken_sides
+from umf.warm_start import beyond, play_at, turned_free
 
 PERIOD = 24  # frames of the synthetic gait's cycle
 
@@ -71,15 +71,47 @@ def test_play_at_plays_features_and_keeps_the_first_frame(real_joints):
     assert abs(ratio - 1.2) < 0.05, ratio
 
 
-def test_taken_sides_sends_person_3_to_the_free_side():
-    stand = torch.tensor([1.0, 1.0, -1.0, 0.0, 1.0])
+def _standing(x: float, z: float, frames: int = 10) -> torch.Tensor:
+    """Features (frames, 262) of a still body whose pelvis starts at (x, z) on the floor."""
+    joints = torch.zeros(frames + 1, 22, 3)
+    joints[..., 1] = torch.linspace(0.0, 1.6, 22)
+    joints[..., 0] += x
+    joints[..., 2] += z + torch.linspace(0.0, 0.3, 22)  # a body, not a point
+    return assemble_features(joints, torch.zeros(frames + 1, 21, 6))
+
+
+def test_beyond_puts_person_3_as_far_past_person_2_as_2_is_past_person_1():
+    """A row starting on someone's spot moves by that person's start, again while it lands
+    on someone (a line of four); a row on nobody's spot, or with nobody (NaN), stays."""
+    rows = torch.stack([_standing(0.9, 0.0), _standing(0.1, -2.0), _standing(-0.9, 0.1),
+                        _standing(0.9, 0.0), _standing(0.9, 0.0)])  # fmt: skip
     others = torch.tensor([
-        [[0.9, 0.0]],  # person 2 on the left: person 3 goes right
-        [[-0.9, 0.1]],  # person 2 on the right: the left is free, stays
-        [[-0.1, 2.0]],  # person 2 straight ahead (within the side margin): stays
-        [[0.9, 0.0]],  # no side asked: none given
-        [[0.9, 0.0]],  # (row 5 has person 3 on the left too, below)
+        [[0.95, 0.05], [-5.0, -5.0]],  # person 2 on the left: beyond, at 1.85
+        [[0.0, -2.1], [0.0, -4.0]],  # single file: behind 2 is 3's spot, so one more step
+        [[0.95, 0.05], [-5.0, -5.0]],  # this row is on the right: nobody there
+        [[0.9, 0.0], [1.8, 0.0]],  # a line of four: beyond 2 is 3's spot, beyond 3 is free
+        [[float("nan"), float("nan")], [float("nan"), float("nan")]],  # nobody
     ])  # fmt: skip
-    assert taken_sides(stand, others).tolist() == [-1.0, 1.0, -1.0, 0.0, -1.0]
-    both = torch.tensor([[[0.9, 0.0], [-0.9, 0.0]]])  # both sides taken: as it was
-    assert taken_sides(torch.tensor([1.0]), both).tolist() == [1.0]
+    start = features_to_joints(beyond(rows, others)[:, :1])[:, 0, 0][:, [0, 2]]
+    want = torch.tensor([[1.85, 0.05], [0.1, -6.2], [-0.9, 0.1], [2.7, 0.0], [0.9, 0.0]])
+    torch.testing.assert_close(start, want, atol=1e-5, rtol=0)
+    moved = beyond(rows, others)
+    torch.testing.assert_close(moved[:, :, 66:], rows[:, :, 66:])  # velocities and the rest
+
+
+def test_turned_free_turns_an_answer_about_person_1_to_a_free_bearing():
+    """A row facing person 1 from person 2's spot is turned about the origin by the smallest
+    bearing that clears everybody by ``clear``: the same distance from person 1; rows not
+    asked for, or already clear, stay."""
+    import math
+
+    rows = torch.stack([_standing(0.0, 2.4), _standing(0.0, 2.4), _standing(3.0, 3.0)])
+    others = torch.tensor([[[0.05, 2.45]], [[0.05, 2.45]], [[0.05, 2.45]]])
+    out, turned = turned_free(rows, others, torch.tensor([True, False, True]), clear=1.2)
+    assert turned.tolist() == [True, False, False]
+    start = features_to_joints(out[:, :1])[:, 0, 0][:, [0, 2]]
+    assert float(start[0].norm()) == pytest.approx(2.4, abs=1e-5)  # as far from person 1
+    assert float((start[0] - others[0, 0]).norm()) >= 1.2
+    bearing = math.degrees(math.atan2(float(start[0, 0]), float(start[0, 1])))
+    assert abs(bearing) == pytest.approx(40.0, abs=1e-3)  # 20 is not enough at 2.4 m
+    torch.testing.assert_close(out[1:], rows[1:])

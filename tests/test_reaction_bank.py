@@ -638,3 +638,8 @@ def test_avoid_keeps_a_reaction_off_where_someone_already_starts():
     assert bank.pick(query[:1], 30, 1, avoid=everywhere)[1].tolist() == [0]
     empty = torch.zeros(2, 0, 2)
     assert bank.pick(query, 30, 1, avoid=empty)[1].tolist() == [0, 0]
+    nobody = torch.full((2, 1, 2), float("nan"))  # NaN: nobody to keep off
+    assert bank.pick(query, 30, 1, avoid=nobody)[1].tolist() == [0, 0]
+    mixed = torch.cat([person2[:1], nobody[:1]])  # row 1 keeps off, row 2 has nobody
+    got = bank.pick(query, 30, 1, avoid=mixed)[1].tolist()
+    assert got[1] == 0 and float(torch.dist(starts[got[0]], person2[0, 0])) >= SPOT

@@ -235,10 +235,12 @@ class SFlowConfig:
     # on) and taken whatever its own pace: the bank's real partners are slower than the
     # P-Flow's runners, and within warm_pace a partner 15 % slow still fits
     warm_play: bool = False
-    # person k >= 3 retrieves among the reactions that start at least umf.reaction_bank.SPOT
-    # from where people 2..k - 1 start, on the other side of person 1 where theirs is taken:
-    # the S-Flow, trained on pairs, puts every added person where it would put a partner of
-    # person 1 (results/reactions-20261208)
+    # person k >= 3 keeps off where people 2..k - 1 start (umf.reaction_bank.SPOT): one
+    # travelling with person 1 is moved beyond the one whose spot it lands on (a row, a
+    # single file: umf.warm_start.beyond), anyone else retrieved away from them and turned
+    # about person 1 to a free bearing (an audience: turned_free); the S-Flow, trained on
+    # pairs, puts every added person where it would put a partner of person 1
+    # (results/reactions-20261208)
     warm_apart: bool = False
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least

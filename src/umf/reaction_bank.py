@@ -184,7 +184,8 @@ class ReactionBank:
         least ``SPOT`` from every point of ``avoid`` (B, M, 2); a row with none keeps what it
         had."""
         start = self.starts[length].to(avoid)  # (N, 2)
-        free = (torch.cdist(avoid, start[None].expand(len(avoid), -1, -1)) >= SPOT).all(dim=1)
+        gap = torch.cdist(avoid, start[None].expand(len(avoid), -1, -1))  # (B, M, N)
+        free = ((gap >= SPOT) | gap.isnan()).all(dim=1)  # a NaN point: nobody there
         rest = torch.ones_like(free) if allowed is None else allowed
         free = free & rest
         return torch.where(free.any(dim=1, keepdim=True), free, rest)
@@ -271,7 +272,7 @@ class ReactionBank:
         row with no reaction on its side, ignores it). ``avoid`` (B, M, 2): where people
         already in each row's scene start on the floor (x, z in person 1's frame); only the
         reactions starting at least ``SPOT`` from all of them compete (a row with none keeps
-        what it had). Whether each row had one within its
+        what it had; NaN points stand for nobody). Whether each row had one within its
         pace is all True without a pace, so a caller can keep what it had rather than take a
         reaction at the wrong pace."""
         length = self.bucket(frames)

@@ -51,6 +51,7 @@ scene.
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import torch
@@ -68,6 +69,7 @@ from umf.representation import (
     hold_to_length,
     joints_to_rot6d,
     leader_frame,
+    place_features,
     shift_in_time,
     transform_features,
 )
@@ -129,21 +131,59 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
     return torch.stack(out).to(features.device)
 
 
-def taken_sides(stand: Tensor, others: Tensor) -> Tensor:
-    """``stand`` (B,) (+1 left of person 1, -1 right, 0 either) turned to the other side
-    where one of ``others`` (B, M, 2: where people 2..k - 1 start, person 1's frame) already
-    starts on it and none on the other: person k of a row of three beside person 1."""
-    x = others[..., 0]
-    taken = torch.sign(x) * (x.abs() > SIDE_MARGIN)  # (B, M)
-    mine = (taken == stand[:, None]).any(dim=1) & (stand != 0)
-    theirs = (taken == -stand[:, None]).any(dim=1)
-    return torch.where(mine & ~theirs, -stand, stand)
+def beyond(features: Tensor, others: Tensor) -> Tensor:
+    """``features`` (B, T, 262) of people travelling with person 1 moved on the floor, where
+    a row starts within ``SPOT`` of one of ``others`` (B, M, 2: where people 2..k - 1
+    start, person 1's frame; NaN: nobody), by that person's own start, and by as much again
+    while it lands on someone. Person 3 of a row walking side by side walks on person 2's far
+    side, of a single file behind person 2: each does to the one before what person 2 does
+    to person 1."""
+    gap = torch.nan_to_num(torch.cdist(floor_start(features)[:, None], others)[:, 0],
+                           nan=float("inf"))  # (B, M)  # fmt: skip
+    near = gap.argmin(dim=1)
+    hit = gap.gather(1, near[:, None])[:, 0] < SPOT
+    step = others[torch.arange(len(others), device=others.device), near]  # (B, 2)
+    step = torch.where(hit[:, None], step, torch.zeros_like(step))
+    for _ in range(others.shape[1]):
+        if not bool(hit.any()):
+            break
+        features = place_features(features, 0.0, step[:, 0] * hit, step[:, 1] * hit)
+        gap = torch.cdist(floor_start(features)[:, None], others)[:, 0]
+        hit = hit & (torch.nan_to_num(gap, nan=float("inf")) < SPOT).any(dim=1)
+    return features
 
 
-def crowded(features: Tensor, others: Tensor) -> Tensor:
-    """(B,) whether each row of ``features`` (B, T, 262) starts within ``SPOT`` of one of
+def crowded(features: Tensor, others: Tensor, spot: float = SPOT) -> Tensor:
+    """(B,) whether each row of ``features`` (B, T, 262) starts within ``spot`` of one of
     ``others`` (B, M, 2): where people 2..k - 1 start."""
-    return (torch.cdist(floor_start(features)[:, None], others)[:, 0] < SPOT).any(dim=-1)
+    return (torch.cdist(floor_start(features)[:, None], others)[:, 0] < spot).any(dim=-1)
+
+
+# m a person turned about person 1 to a free bearing keeps from where anyone before starts:
+# an audience's members stand 0.9-1.2 m apart (umf.data.scene_relations); at SPOT they bowed
+# into each other (results/umf-small-bandai-20261212)
+AROUND = 1.2
+# turns about person 1 tried, nearest first, for a proposal standing on someone's spot
+BEARINGS = tuple(math.radians(sign * deg) for deg in range(20, 181, 20) for sign in (1, -1))
+
+
+def turned_free(features: Tensor, others: Tensor, rows: Tensor,
+                clear: float = 0.8) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """``features`` (B, T, 262), the ``rows`` (B,) among them that start within ``SPOT`` of
+    one of ``others`` (B, M, 2) turned about person 1's first-frame pelvis (the origin) by
+    the smallest of :data:`BEARINGS` that puts their start at least ``SPOT`` from all of
+    them, and (B,) which were turned. A reaction that faces person 1 (an answer, an
+    audience member, someone walking over) still faces them from its new bearing; the bank
+    holds pairs only, so the third member of an audience had no real reaction standing
+    beside the second one to take."""
+    out, turned = features.clone(), torch.zeros(len(features), dtype=torch.bool)
+    for i in (rows & crowded(features, others)).nonzero().flatten().tolist():
+        for yaw in BEARINGS:
+            moved = place_features(features[i], yaw, 0.0, 0.0)
+            if not bool(crowded(moved[None], others[i : i + 1], clear)[0]):
+                out[i], turned[i] = moved, True
+                break
+    return out, turned.to(features.device)
 
 
 def floor_start(features: Tensor) -> Tensor:
@@ -220,13 +260,16 @@ def proposal(
         # side since 20261208, more surely than warm_side's caption shortlist, which also
         # holds reactions whose captions name none (results/umf-small-bandai-20261211)
         stand = None if together is None else start_side(decoded) * together
-        if stand is not None and others is not None:
-            stand = taken_sides(stand, others)
         bank, frames = pipe.reactions, decoded.shape[1]
+        # person k >= 3 keeps off people 2..k - 1: one travelling with person 1 is moved
+        # beyond them below (:func:`beyond`), everybody else retrieved away from them
+        avoid = others
+        if others is not None and together is not None:
+            avoid = torch.where(together[:, None, None], others.new_tensor(float("nan")), others)
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
-                                      side, stand, others)  # fmt: skip
+                                      side, stand, avoid)  # fmt: skip
         z, waits = bank.latents[length].to(first)[idx], None
         if together is not None and length in bank.velocities:
             # beside a leader, a reaction nearer the leader's pace than the first pass fits,
@@ -234,14 +277,21 @@ def proposal(
             got = bank.velocities[length].to(velocity)[idx]
             nearer = (got - velocity).norm(dim=-1) < (own_pace - velocity).norm(dim=-1)
             fits = fits | (together & nearer)
-        if cfg.warm_play and together is not None and bool(together.any()):
-            # at person 1's pace, whatever the reaction's own: it fits
+        if together is not None and (cfg.warm_play or others is not None) and together.any():
             rows = together.nonzero().flatten()
             reaction = pipe.decode(z[rows], frames, reaction=True)
-            own = floor_velocity(reaction, fps).norm(dim=-1).clamp_min(MOVING)
-            played = play_at(reaction, velocity[rows].norm(dim=-1) / own)
-            z, fits = z.clone(), fits | together
-            z[rows] = pipe._encode(played).to(z)
+            changed = torch.zeros(len(rows), dtype=torch.bool, device=rows.device)
+            if cfg.warm_play:  # at person 1's pace, whatever the reaction's own: it fits
+                own = floor_velocity(reaction, fps).norm(dim=-1).clamp_min(MOVING)
+                reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
+                fits, changed = fits | together, ~changed
+            if others is not None:  # on someone's spot: beyond them
+                moved = beyond(reaction, others[rows])
+                changed = changed | (moved != reaction).any(dim=2).any(dim=1)
+                reaction = moved
+            if bool(changed.any()):
+                z = z.clone()
+                z[rows[changed]] = pipe._encode(reaction[changed]).to(z)
         if answers_first and bank.lags and cfg.warm_timing > 0:
             z, lag, stored = answers(bank, first, frames, z, cfg, generator,
                                      pipe.sflow.latent_norm.normalize, prompt,
@@ -432,9 +482,20 @@ def sample_added(
                                        answers_first=answers_first, leader=leader,
                                        others=others)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
+        turned = torch.zeros_like(answer)
+        if others is not None:  # people not travelling with person 1 turn to a free bearing
+            fps = pipe.config.fps
+            along = (travels_with(floor_velocity(decoded, fps), floor_velocity(leader, fps),
+                                  cfg.warm_together) if leader is not None
+                     else torch.zeros_like(answer))  # fmt: skip
+            seen = pipe.decode(guess, frames, reaction=True)
+            moved, turned = turned_free(seen, others, ~along, AROUND)
+            if bool(turned.any()):
+                guess = guess.clone()
+                guess[turned] = pipe._encode(moved[turned]).to(guess)
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
-        take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer
+        take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer | turned
         if others is not None:  # a first pass on someone's spot is sampled again, gliding or not
             take = take | (fits & crowded(decoded, others))
         w = torch.where(take[:, None, None], again, w)
