@@ -115,3 +115,20 @@ def test_turned_free_turns_an_answer_about_person_1_to_a_free_bearing():
     bearing = math.degrees(math.atan2(float(start[0, 0]), float(start[0, 1])))
     assert abs(bearing) == pytest.approx(40.0, abs=1e-3)  # 20 is not enough at 2.4 m
     torch.testing.assert_close(out[1:], rows[1:])
+
+
+def test_clear_of_moves_a_partner_sideways_until_no_joint_is_too_near():
+    """A partner 0.3 m to the leader's left (or right) moves out until every joint is 0.4 m
+    from the leader's, a little past; one already clear, or straight behind, stays."""
+    from umf.warm_start import PLAY_CLEAR, clear_of
+
+    leader = torch.stack([_standing(0.0, 0.0)] * 4)
+    rows = torch.stack([_standing(0.3, 0.0), _standing(-0.3, 0.0), _standing(1.0, 0.0),
+                        _standing(0.0, -0.3)])  # fmt: skip
+    out = clear_of(rows, leader)
+    x = features_to_joints(out[:, :1])[:, 0, 0, 0]
+    assert PLAY_CLEAR <= float(x[0]) <= PLAY_CLEAR + 0.05
+    assert -PLAY_CLEAR - 0.05 <= float(x[1]) <= -PLAY_CLEAR
+    torch.testing.assert_close(out[2:], rows[2:])
+    gap = features_to_joints(out[:2])[:, :, :, None] - features_to_joints(leader[:2])[:, :, None]
+    assert float(gap.norm(dim=-1).min()) >= PLAY_CLEAR

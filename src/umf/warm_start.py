@@ -131,6 +131,28 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
     return torch.stack(out).to(features.device)
 
 
+# m a partner played at the leader's pace keeps between any of its joints and the leader's:
+# level partners touched where the slower real one had passed (the checks count 0.25 m as
+# contact, and the second pass drifts a little from its proposal)
+PLAY_CLEAR = 0.4
+
+
+def clear_of(features: Tensor, leader: Tensor, distance: float = PLAY_CLEAR) -> Tensor:
+    """``features`` (B, T, 262) moved sideways (along person 1's x, away from them: the side
+    each starts on) until no joint comes within ``distance`` of one of ``leader``'s (B, T,
+    262) at any frame; a row starting straight ahead or behind stays."""
+    for _ in range(3):  # a shift can bring another frame's arm into play
+        a, b = features_to_joints(features), features_to_joints(leader)
+        gap = (a[:, :, :, None] - b[:, :, None]).norm(dim=-1).flatten(1).min(dim=1).values
+        side = torch.sign(floor_start(features)[:, 0])
+        need = (distance - gap).clamp_min(0.0) * (side != 0)
+        if not bool((need > 1e-4).any()):
+            break
+        dx = side * (need + 0.02) * (need > 1e-4)  # a little past, for the next frame's arm
+        features = place_features(features, 0.0, dx, torch.zeros_like(dx))
+    return features
+
+
 def beyond(features: Tensor, others: Tensor) -> Tensor:
     """``features`` (B, T, 262) of people travelling with person 1 moved on the floor, where
     a row starts within ``SPOT`` of one of ``others`` (B, M, 2: where people 2..k - 1
@@ -284,6 +306,7 @@ def proposal(
             if cfg.warm_play:  # at person 1's pace, whatever the reaction's own: it fits
                 own = floor_velocity(reaction, fps).norm(dim=-1).clamp_min(MOVING)
                 reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
+                reaction = clear_of(reaction, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
             if others is not None:  # on someone's spot: beyond them
                 moved = beyond(reaction, others[rows])
