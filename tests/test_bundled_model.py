@@ -215,7 +215,7 @@ def test_runners_keep_pace_with_their_leader(pipe):
     of the 16 scenes. 20261211 kept 5 and 5: the bank's real partners run slower than the
     P-Flow's leaders, and a third runner started on the second one's spot; 20261212 plays
     the partner at the leader's pace (``sflow.warm_play``) and keeps person 3 off person 2's
-    spot (``sflow.warm_apart``): 7 and 6 (results/umf-small-bandai-20261212)."""
+    spot (``sflow.warm_apart``): 7 and 7 (results/umf-small-bandai-20261212)."""
     fps, missed = pipe.config.fps, []
     for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
         for seed in range(8):

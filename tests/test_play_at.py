@@ -132,3 +132,8 @@ def test_clear_of_moves_a_partner_sideways_until_no_joint_is_too_near():
     torch.testing.assert_close(out[2:], rows[2:])
     gap = features_to_joints(out[:2])[:, :, :, None] - features_to_joints(leader[:2])[:, :, None]
     assert float(gap.norm(dim=-1).min()) >= PLAY_CLEAR
+    # never pushed to start farther out than PLAY_FARTHEST, clear or not
+    from umf.warm_start import PLAY_FARTHEST
+
+    wide = clear_of(_standing(1.2, 0.0)[None], _standing(1.0, 0.0)[None])
+    assert float(features_to_joints(wide[:, :1])[0, 0, 0, 0]) == pytest.approx(PLAY_FARTHEST)

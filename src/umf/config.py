@@ -233,8 +233,8 @@ class SFlowConfig:
     # with warm_together: the reaction retrieved for a row travelling with person 1 is played
     # at person 1's pace (umf.data.extension.played_at: resampled in time, its gait carried
     # on) and taken whatever its own pace, moved sideways to keep its joints 0.4 m from the
-    # leader's (umf.warm_start.clear_of): the bank's real partners are slower than the
-    # P-Flow's runners, and within warm_pace a partner 15 % slow still fits
+    # leader's, at most 1.3 m out (umf.warm_start.clear_of): the bank's real partners are
+    # slower than the P-Flow's runners, and within warm_pace a partner 15 % slow still fits
     warm_play: bool = False
     # person k >= 3 keeps off where people 2..k - 1 start (umf.reaction_bank.SPOT): one
     # travelling with person 1 is moved beyond the one whose spot it lands on (a row, a

@@ -135,12 +135,17 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
 # level partners touched where the slower real one had passed (the checks count 0.25 m as
 # contact, and the second pass drifts a little from its proposal)
 PLAY_CLEAR = 0.4
+# m from person 1 a partner moved clear of them may start at most: real partners side by side
+# start 0.7-1.1 m out, and a runner pushed clear of a leader's swinging arms started beyond
+# the 1.6 m a pair walking together is checked for
+PLAY_FARTHEST = 1.3
 
 
 def clear_of(features: Tensor, leader: Tensor, distance: float = PLAY_CLEAR) -> Tensor:
     """``features`` (B, T, 262) moved sideways (along person 1's x, away from them: the side
     each starts on) until no joint comes within ``distance`` of one of ``leader``'s (B, T,
-    262) at any frame; a row starting straight ahead or behind stays."""
+    262) at any frame, but never to start more than :data:`PLAY_FARTHEST` to the side; a row
+    starting straight ahead or behind stays."""
     for _ in range(3):  # a shift can bring another frame's arm into play
         a, b = features_to_joints(features), features_to_joints(leader)
         gap = (a[:, :, :, None] - b[:, :, None]).norm(dim=-1).flatten(1).min(dim=1).values
@@ -149,6 +154,8 @@ def clear_of(features: Tensor, leader: Tensor, distance: float = PLAY_CLEAR) -> 
         if not bool((need > 1e-4).any()):
             break
         dx = side * (need + 0.02) * (need > 1e-4)  # a little past, for the next frame's arm
+        room = (PLAY_FARTHEST - floor_start(features)[:, 0].abs()).clamp_min(0.0)
+        dx = torch.sign(dx) * torch.minimum(dx.abs(), room)  # but no farther out than that
         features = place_features(features, 0.0, dx, torch.zeros_like(dx))
     return features
 
