@@ -2,7 +2,7 @@
 issue, on a held-out set that is not the test set.
 
     python research/group_checks.py --corpus CORPUS [--model DIR] [--scenes 100]
-        [--split val] [--pairs] [--seed S] [--set key=value ...]
+        [--split val] [--pairs [--relation NAME ...]] [--seed S] [--set key=value ...]
         [--context all|leader|previous|previous-frame|all-previous-frame] [--json FILE]
 
 The protocol's groups of 3-6 are the zero-shot *test* set; a sampling setting chosen on them
@@ -104,6 +104,7 @@ def score(records: list[dict], joints: list[np.ndarray]) -> dict:
     mean = lambda v: round(float(np.mean(v)), 3)  # noqa: E731
     gaps = [g for j in joints for g in closest_to_earlier(j)]
     return {
+        "failing": len(scenes["all"]) - sum(scenes["all"]),  # scenes failing a check
         "scenes": {k: mean(v) for k, v in sorted(scenes.items())},
         "kinds": {k: mean(v) for k, v in sorted(kinds.items())},
         "relation_kinds": {k: mean(v) for k, v in sorted(by_rel_kind.items())},
@@ -127,6 +128,13 @@ def main() -> None:
         metavar="KEY=VALUE",
         help="an sflow config value for this run (e.g. pair_steps=10)",
     )
+    ap.add_argument(
+        "--relation",
+        action="append",
+        default=[],
+        help="with --pairs: only the scenes of this relation among the first --scenes "
+        "(repeatable; e.g. walk_side_by_side)",
+    )
     ap.add_argument("--seed", type=int, default=0, help="the evaluation plan's seed")
     ap.add_argument(
         "--context",
@@ -146,6 +154,8 @@ def main() -> None:
     corpus = Corpus.load(args.corpus)
     if args.pairs:
         records = list(corpus.scenes[args.split])[: args.scenes]
+        if args.relation:
+            records = [r for r in records if r.get("relation") in args.relation]
     elif args.split == "val":
         records = val_groups(corpus, args.scenes)
     else:
@@ -166,6 +176,7 @@ def main() -> None:
            "delivered": score(records, delivered)}  # fmt: skip
     for name in ("raw", "delivered"):
         s = out[name]
+        print(f"== {name}: {s['failing']} of {len(records)} scenes fail a check")
         print(
             f"== {name}: scenes passing {s['scenes']['all']}, closest to earlier "
             f"(median) {s['closest_m'][0]} m"

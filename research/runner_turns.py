@@ -5,7 +5,9 @@
 1. The train split's ``run_side_by_side`` scenes as the S-Flow and the reaction bank see
    them (4-second crops, person 1's frame, the model's ``repeat_scene_gait``): how far each
    person's path turns, the angle between its first and second 2-second chords
-   (+: to the left).
+   (+: to the right; +x is the left of someone facing +z), and how fast person 2 drifts
+   sideways from person 1 (:func:`sideways_drift`: two solo clips side by side do not keep
+   their spacing).
 2. "Two people run side by side." and "Three people run side by side." (4 s, seeds 0..N-1,
    delivered): the leader's turn, chord and path speed, and each follower's start and end
    along the leader's heading and speed over the leader's (``research/keep_pace.py``'s
@@ -29,23 +31,38 @@ HALF = 60  # frames: the 2-second chords of a 4-second crop (30 fps)
 
 
 def turn_deg(path: np.ndarray) -> float:
-    """The angle (degrees, + to the left) from a floor path's (T, 2) first 2-second chord to
+    """The angle (degrees, + to the right) from a floor path's (T, 2) first 2-second chord to
     its second."""
     a, b = path[HALF] - path[0], path[-1] - path[HALF]
     return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
 
 
+def sideways_drift(joints: np.ndarray, fps: float) -> float:
+    """How fast (m/s) person 2 of a scene (P, T, 22, 3) drifts sideways from person 1: the
+    change of their pelvises' offset across person 1's start-to-end chord, over the crop."""
+    p = joints[:2, :, 0][..., [0, 2]]
+    chord = p[0, -1] - p[0, 0]
+    across = np.array([chord[1], -chord[0]]) / max(float(np.linalg.norm(chord)), 1e-9)
+    offset = (p[1] - p[0]) @ across
+    return float(abs(offset[-1] - offset[0])) * fps / (p.shape[1] - 1)
+
+
 def training_turns(pipe, corpus) -> None:
     turns: list[list[float]] = [[], []]
+    drift = []
     for j in run_crops(pipe, corpus, 2 * HALF, mirror=True):
         for k in (0, 1):
             turns[k].append(turn_deg(j[k, :, 0][:, [0, 2]]))
+        drift.append(sideways_drift(j, pipe.config.fps))
     for k, name in ((0, "person 1"), (1, "person 2")):
         t = np.array(turns[k])
         p10, p50, p90 = np.percentile(t, [10, 50, 90])
         wide = float(np.mean(abs(t) > 20))
         print(f"1. training crops ({len(t)}), {name}: turn p10 / median / p90 {p10:+.0f} / "
               f"{p50:+.0f} / {p90:+.0f} deg; more than 20 deg: {wide:.2f}")  # fmt: skip
+    p50, p90 = np.percentile(drift, [50, 90])
+    print(f"1. training crops ({len(drift)}): person 2 drifts sideways from person 1 at "
+          f"{p50:.2f} m/s (median), {p90:.2f} (p90)")  # fmt: skip
 
 
 def generated_turns(pipe, seeds: int) -> None:

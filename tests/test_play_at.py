@@ -101,20 +101,26 @@ def test_beyond_puts_person_3_as_far_past_person_2_as_2_is_past_person_1():
 
 def test_turned_free_turns_an_answer_about_person_1_to_a_free_bearing():
     """A row facing person 1 from person 2's spot is turned about the origin by the smallest
-    bearing that clears everybody by ``clear``: the same distance from person 1; rows not
-    asked for, or already clear, stay."""
+    bearing that clears everybody by ``clear`` (by default ``AROUND``): the same distance
+    from person 1; a row already clear stays."""
     import math
 
-    rows = torch.stack([_standing(0.0, 2.4), _standing(0.0, 2.4), _standing(3.0, 3.0)])
-    others = torch.tensor([[[0.05, 2.45]], [[0.05, 2.45]], [[0.05, 2.45]]])
-    out, turned = turned_free(rows, others, torch.tensor([True, False, True]), clear=1.2)
-    assert turned.tolist() == [True, False, False]
+    from umf.warm_start import AROUND
+
+    rows = torch.stack([_standing(0.0, 2.4), _standing(3.0, 3.0)])
+    others = torch.tensor([[[0.05, 2.45]], [[0.05, 2.45]]])
+    out, turned = turned_free(rows, others)
+    assert turned.tolist() == [True, False]
     start = features_to_joints(out[:, :1])[:, 0, 0][:, [0, 2]]
     assert float(start[0].norm()) == pytest.approx(2.4, abs=1e-5)  # as far from person 1
-    assert float((start[0] - others[0, 0]).norm()) >= 1.2
+    assert float((start[0] - others[0, 0]).norm()) >= AROUND
     bearing = math.degrees(math.atan2(float(start[0, 0]), float(start[0, 1])))
     assert abs(bearing) == pytest.approx(40.0, abs=1e-3)  # 20 is not enough at 2.4 m
     torch.testing.assert_close(out[1:], rows[1:])
+    # a smaller clearance is met at the first bearing
+    near, _ = turned_free(rows[:1], others[:1], clear=0.8)
+    first = features_to_joints(near[:, :1])[0, 0, 0, [0, 2]]
+    assert abs(math.degrees(math.atan2(float(first[0]), float(first[1])))) == pytest.approx(20.0)
 
 
 def test_clear_of_moves_a_partner_sideways_until_no_joint_is_too_near():

@@ -59,6 +59,14 @@ def _per_length(raw: dict[str, Tensor], prefix: str) -> dict[int, Tensor]:
     return {int(k.removeprefix(prefix)): v.float() for k, v in raw.items() if k.startswith(prefix)}
 
 
+def _narrowed(keep: Tensor, allowed: Tensor | None) -> Tensor:
+    """``allowed`` (B, N) (None: everything) and ``keep`` (B, N), except for rows where
+    nothing allowed is kept: those keep what they were allowed."""
+    rest = torch.ones_like(keep) if allowed is None else allowed
+    keep = keep & rest
+    return torch.where(keep.any(dim=1, keepdim=True), keep, rest)
+
+
 @dataclass
 class ReactionBank:
     """Real reactions per length: ``latents[frames]`` (N, p, r) on the VAE's scale."""
@@ -185,24 +193,14 @@ class ReactionBank:
         had."""
         start = self.starts[length].to(avoid)  # (N, 2)
         gap = torch.cdist(avoid, start[None].expand(len(avoid), -1, -1))  # (B, M, N)
-        free = ((gap >= SPOT) | gap.isnan()).all(dim=1)  # a NaN point: nobody there
-        rest = torch.ones_like(free) if allowed is None else allowed
-        free = free & rest
-        return torch.where(free.any(dim=1, keepdim=True), free, rest)
+        return _narrowed(((gap >= SPOT) | gap.isnan()).all(dim=1), allowed)  # NaN: nobody
 
-    def _on_side(self, length: int, stand: Tensor, allowed: Tensor | None) -> Tensor | None:
+    def _on_side(self, length: int, stand: Tensor, allowed: Tensor | None) -> Tensor:
         """``allowed`` (B, N) (None: every reaction) narrowed, for the rows whose ``stand``
         (B,) is +1 or -1, to the reactions starting more than ``SIDE_MARGIN`` to that side of
         person 1; a row with none there keeps what it had."""
         x = self.starts[length][:, 0].to(stand)  # (N,)
-        on = (stand[:, None] == 0) | (x[None] * stand[:, None] > SIDE_MARGIN)
-        if allowed is not None:
-            on = on & allowed
-        none = ~on.any(dim=1)
-        if not none.any():
-            return on
-        rest = torch.ones_like(on) if allowed is None else allowed
-        return torch.where(none[:, None], rest, on)
+        return _narrowed((stand[:, None] == 0) | (x[None] * stand[:, None] > SIDE_MARGIN), allowed)
 
     def lag(self, length: int, idx: Tensor) -> Tensor | None:
         """(B,) the lags (frames) of the reactions ``idx`` stored at ``length`` (as

@@ -249,6 +249,12 @@ def fuse_positions(features: Tensor, position_weight: float, root_weight: float 
     return torch.cat([fused.to(dtype), new_vel.to(dtype), rest], dim=-1)
 
 
+def floor_start(features: Tensor) -> Tensor:
+    """(..., 2) the pelvis's first-frame floor position (x, z) in m, for features (..., T, 262),
+    in their frame: for people 2..N, person 1's (+x: person 1's left)."""
+    return features[..., 0, POS][..., [0, 2]]  # the pelvis is joint 0
+
+
 def pin_floor_start(features: Tensor) -> Tensor:
     """Features (..., T, 262) moved on the floor (every joint, every frame, by one shift
     per row) so that the first-frame pelvis stands over the origin: where the canonical
@@ -258,7 +264,7 @@ def pin_floor_start(features: Tensor) -> Tensor:
     (a generated runner's positions travel half as far as its legs), the average leaves
     the start a metre or more from the origin, and people placed relative to it out of
     place. Velocities and everything else are unchanged."""
-    start = features[..., 0, POS][..., [0, 2]]  # (..., 2): the first-frame pelvis on the floor
+    start = floor_start(features)
     return place_features(features, 0.0, -start[..., 0], -start[..., 1])
 
 

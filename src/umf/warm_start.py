@@ -66,6 +66,7 @@ from umf.representation import (
     assemble_features,
     features_to_joints,
     features_to_joints_integrated,
+    floor_start,
     hold_to_length,
     joints_to_rot6d,
     leader_frame,
@@ -119,6 +120,17 @@ def travels_with(first: Tensor, leader: Tensor, cosine: float) -> Tensor:
     return moving & (torch.nn.functional.cosine_similarity(first, leader, dim=-1) >= cosine)
 
 
+def together_rows(pipe: Any, decoded: Tensor, leader: Tensor | None) -> Tensor | None:
+    """(B,) which first passes (``decoded`` (B, T, 262)) travel with person 1 (``leader``)
+    by :func:`travels_with` at ``sflow.warm_together``; None where that is off (or there is
+    no pace to compare, ``sflow.warm_pace`` 0, or no leader)."""
+    cfg, fps = pipe.config.sflow, pipe.config.fps
+    if leader is None or cfg.warm_together <= 0 or cfg.warm_pace <= 0:
+        return None
+    return travels_with(floor_velocity(decoded, fps), floor_velocity(leader, fps),
+                        cfg.warm_together)  # fmt: skip
+
+
 def play_at(features: Tensor, rate: Tensor) -> Tensor:
     """Features (B, T, 262) played ``rate`` (B,) times as fast (:func:`played_at`: clamped
     to a fifth slower and a quarter faster, the gait carried on past the end), rotations
@@ -149,13 +161,13 @@ def clear_of(features: Tensor, leader: Tensor, distance: float = PLAY_CLEAR) -> 
     for _ in range(3):  # a shift can bring another frame's arm into play
         a, b = features_to_joints(features), features_to_joints(leader)
         gap = (a[:, :, :, None] - b[:, :, None]).norm(dim=-1).flatten(1).min(dim=1).values
-        side = torch.sign(floor_start(features)[:, 0])
-        need = (distance - gap).clamp_min(0.0) * (side != 0)
+        x = floor_start(features)[:, 0]
+        need = (distance - gap).clamp_min(0.0) * (x != 0)
         if not bool((need > 1e-4).any()):
             break
-        dx = side * (need + 0.02) * (need > 1e-4)  # a little past, for the next frame's arm
-        room = (PLAY_FARTHEST - floor_start(features)[:, 0].abs()).clamp_min(0.0)
-        dx = torch.sign(dx) * torch.minimum(dx.abs(), room)  # but no farther out than that
+        # a little past, for the next frame's arm, but no farther out than PLAY_FARTHEST
+        room = (PLAY_FARTHEST - x.abs()).clamp_min(0.0)
+        dx = torch.sign(x) * torch.minimum((need + 0.02) * (need > 1e-4), room)
         features = place_features(features, 0.0, dx, torch.zeros_like(dx))
     return features
 
@@ -177,14 +189,13 @@ def beyond(features: Tensor, others: Tensor) -> Tensor:
         if not bool(hit.any()):
             break
         features = place_features(features, 0.0, step[:, 0] * hit, step[:, 1] * hit)
-        gap = torch.cdist(floor_start(features)[:, None], others)[:, 0]
-        hit = hit & (torch.nan_to_num(gap, nan=float("inf")) < SPOT).any(dim=1)
+        hit = hit & crowded(features, others)
     return features
 
 
 def crowded(features: Tensor, others: Tensor, spot: float = SPOT) -> Tensor:
     """(B,) whether each row of ``features`` (B, T, 262) starts within ``spot`` of one of
-    ``others`` (B, M, 2): where people 2..k - 1 start."""
+    ``others`` (B, M, 2): where people 2..k - 1 start (a NaN point, nobody, is never near)."""
     return (torch.cdist(floor_start(features)[:, None], others)[:, 0] < spot).any(dim=-1)
 
 
@@ -196,29 +207,23 @@ AROUND = 1.2
 BEARINGS = tuple(math.radians(sign * deg) for deg in range(20, 181, 20) for sign in (1, -1))
 
 
-def turned_free(features: Tensor, others: Tensor, rows: Tensor,
-                clear: float = 0.8) -> tuple[Tensor, Tensor]:  # fmt: skip
-    """``features`` (B, T, 262), the ``rows`` (B,) among them that start within ``SPOT`` of
-    one of ``others`` (B, M, 2) turned about person 1's first-frame pelvis (the origin) by
-    the smallest of :data:`BEARINGS` that puts their start at least ``SPOT`` from all of
-    them, and (B,) which were turned. A reaction that faces person 1 (an answer, an
-    audience member, someone walking over) still faces them from its new bearing; the bank
-    holds pairs only, so the third member of an audience had no real reaction standing
-    beside the second one to take."""
+def turned_free(features: Tensor, others: Tensor,
+                clear: float = AROUND) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """``features`` (B, T, 262), the rows among them that start within ``SPOT`` of one of
+    ``others`` (B, M, 2) turned about person 1's first-frame pelvis (the origin) by the
+    smallest of :data:`BEARINGS` that puts their start at least ``clear`` from all of them,
+    and (B,) which were turned. A reaction that faces person 1 (an answer, an audience
+    member, someone walking over) still faces them from its new bearing; the bank holds pairs
+    only, so the third member of an audience had no real reaction standing beside the second
+    one to take."""
     out, turned = features.clone(), torch.zeros(len(features), dtype=torch.bool)
-    for i in (rows & crowded(features, others)).nonzero().flatten().tolist():
+    for i in crowded(features, others).nonzero().flatten().tolist():
         for yaw in BEARINGS:
             moved = place_features(features[i], yaw, 0.0, 0.0)
             if not bool(crowded(moved[None], others[i : i + 1], clear)[0]):
                 out[i], turned[i] = moved, True
                 break
     return out, turned.to(features.device)
-
-
-def floor_start(features: Tensor) -> Tensor:
-    """(B, 2) the pelvis's first-frame floor position (x, z) in m, for features (B, T, 262),
-    in their frame: for people 2..N, person 1's (+x: person 1's left)."""
-    return features_to_joints(features[:, :1])[:, 0, 0][:, [0, 2]]
 
 
 def start_side(features: Tensor) -> Tensor:
@@ -279,12 +284,10 @@ def proposal(
         side = None if mirror is None else unit(mirror.pooled.float(), dim=-1)
         fps = pipe.config.fps
         own_pace = floor_velocity(decoded, fps) if cfg.warm_pace > 0 else None
-        together = None  # rows that keep person 1's pace rather than their own
+        together = together_rows(pipe, decoded, leader)  # keep person 1's pace, not theirs
         velocity = own_pace
-        if own_pace is not None and leader is not None and cfg.warm_together > 0:
-            lead = floor_velocity(leader, fps)
-            together = travels_with(own_pace, lead, cfg.warm_together)
-            velocity = torch.where(together[:, None], lead, own_pace)
+        if together is not None:
+            velocity = torch.where(together[:, None], floor_velocity(leader, fps), own_pace)
         # the first pass's side, also where the prompt names one: the S-Flow reads a named
         # side since 20261208, more surely than warm_side's caption shortlist, which also
         # holds reactions whose captions name none (results/umf-small-bandai-20261211)
@@ -514,15 +517,15 @@ def sample_added(
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         turned = torch.zeros_like(answer)
         if others is not None:  # people not travelling with person 1 turn to a free bearing
-            fps = pipe.config.fps
-            along = (travels_with(floor_velocity(decoded, fps), floor_velocity(leader, fps),
-                                  cfg.warm_together) if leader is not None
-                     else torch.zeros_like(answer))  # fmt: skip
-            seen = pipe.decode(guess, frames, reaction=True)
-            moved, turned = turned_free(seen, others, ~along, AROUND)
-            if bool(turned.any()):
-                guess = guess.clone()
-                guess[turned] = pipe._encode(moved[turned]).to(guess)
+            together = together_rows(pipe, decoded, leader)
+            rows = (~together if together is not None else ~turned).nonzero().flatten()
+            if len(rows):
+                seen = pipe.decode(guess[rows], frames, reaction=True)
+                moved, hit = turned_free(seen, others[rows])
+                if bool(hit.any()):
+                    guess, turned = guess.clone(), turned.clone()
+                    guess[rows[hit]] = pipe._encode(moved[hit]).to(guess)
+                    turned[rows[hit]] = True
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
         nfe += m + n
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer | turned

@@ -14,8 +14,9 @@ from umf.coverage import embed
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
+from umf.representation import floor_start
 from umf.train.datasets import SceneDataset
-from umf.warm_start import floor_start, floor_velocity, onsets
+from umf.warm_start import floor_velocity, onsets
 
 STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
 
