@@ -130,10 +130,52 @@ def test_touching_prompts_are_separated_less_but_never_through_each_other(real_j
     _, close = separate_people(scene, **touching_distances({"closest_m": 0.05, "pelvis_m": 0.25}))
     assert np.linalg.norm(default[1]) > 0.1 and np.abs(close).max() < 1e-6
     d = touching_distances({"closest_m": 0.0, "pelvis_m": 0.0})
-    assert d["contact_distance"] == pytest.approx(TOUCH_FLOOR + FIT_MARGIN)
+    assert d["contact_distance"] == pytest.approx(TOUCH_FLOOR)
+    assert d["floor"] == pytest.approx(TOUCH_FLOOR)
     _, through = separate_people(np.stack([a, a]), **d)  # one body inside the other
     assert np.linalg.norm(through[1]) > 0.1
     assert touching_distances(None) == {}
+
+
+def test_touching_people_are_judged_as_often_as_the_take_not_at_their_closest_frame(
+    real_joints,
+):
+    """A couple whose joints come within 5 cm at 2 of 40 frames (the take's 5th percentile
+    is 8 cm) stays where it is under the touching rule; the frame-by-frame bound it
+    replaced pushed it away, as it pushed real salsa takes (research/touch_shifts.py). A
+    frame where the joints overlap still moves it, a centimetre or two, not metres."""
+    from umf.data.relations import closest_joints
+    from umf.separation import TOUCH_FLOOR, separate_people, touching_distances
+
+    a = real_joints.numpy()[:40].astype(np.float64)
+
+    def beside(gaps):
+        """a's double, moved along x frame by frame until its closest joints to a are
+        ``gaps`` (40,) m apart (bisection: the gap grows with the offset)."""
+        b = a.copy()
+        for t, gap in enumerate(gaps):
+            lo, hi = 0.0, 2.0
+            for _ in range(40):
+                mid = (lo + hi) / 2
+                d = closest_joints(a[t : t + 1], a[t : t + 1] + np.array([mid, 0, 0]))[0]
+                lo, hi = (mid, hi) if d < gap else (lo, mid)
+            b[t, :, 0] += hi
+        return b
+
+    gaps = np.full(40, 0.14)  # closest joints 14 cm apart ...
+    gaps[[10, 30]] = 0.05  # ... and 5 cm at two frames (pelvises 0.24 m apart there)
+    near = touching_distances({"closest_m": 0.08, "pelvis_m": 0.25})
+    _, kept = separate_people(np.stack([a, beside(gaps)]), **near)
+    assert np.abs(kept).max() < 1e-9
+    frame_by_frame = {**near, "quantile": 0.0, "floor": 0.0}
+    _, pushed = separate_people(np.stack([a, beside(gaps)]), **frame_by_frame)
+    assert np.linalg.norm(pushed[1]) > 0.015
+    gaps[20] = 0.01  # one frame with joints 1 cm apart: under the floor
+    b = beside(gaps)
+    _, floor = separate_people(np.stack([a, b]), **near)
+    moved = np.stack([a, b + floor[1]])
+    assert 0.01 < np.linalg.norm(floor[1]) < 0.1
+    assert closest_joints(moved[0], moved[1])[0] >= TOUCH_FLOOR - 1e-6
 
 
 @pytest.fixture
