@@ -259,6 +259,11 @@ class SFlowConfig:
     # own prompts, trained beside scene captions that name no gesture, raise no hands
     # (results/umf-small-bandai-20261204c); the P-Flow's do (umf.warm_start)
     own_warm: float = 0.0
+    # > 0: a prompt worded like a real take whose people touch (a salsa couple: the
+    # vocabulary's contact) has people 1 and 2 sampled again from this time on the paths
+    # towards both people of one crop of those takes (the bank's takes; umf.take_start):
+    # the flows' own leader and partner each dance, but their hands do not meet
+    warm_take: float = 0.0
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction
     # start (reaction_noise) lost where person 2 stands (results/flows-long-h200-20261126)

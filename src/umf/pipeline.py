@@ -57,6 +57,7 @@ from umf.reroll import reroll_person
 from umf.scene import Scene
 from umf.separation import separate_people, touching_distances
 from umf.streams import fresh_seed, scene_generators
+from umf.take_start import couple_rows, start_leaders, start_partners
 from umf.text import respell_prompt
 from umf.validation import (
     MAX_PEOPLE,
@@ -319,7 +320,7 @@ class UMFPipeline:
         mirror = mirror_text(self, words) if num_people > 1 else None
         uncond = self.text_encoder.encode([""] * b).to(self.device)
         nfe = 0
-        frame = None
+        frame = couples = None
         if actor is not None:
             actor_t, frame = self._canonical_actor(actor)
             t = actor_t.shape[0] - 1  # T joint frames are T - 1 feature frames
@@ -329,16 +330,18 @@ class UMFPipeline:
             t = self._frames(req.seconds)
             token = MULTI_PERSON if num_people > 1 else SINGLE_PERSON
             dataset = torch.full((b,), token, dtype=torch.long)
-            z1, n = self.pflow.sample(
-                text,
-                uncond,
-                dataset=dataset.to(self.device),
-                steps=req.pflow_steps or self.config.pflow.steps,
-                guidance=FROM_CONFIG if guidance is None else guidance,  # per stage
-                generator=gen,
-                **person_text(self, req.person_prompts, 0, b),
-            )
-            latents, nfe = [z1], nfe + n
+            pflow = {"dataset": dataset.to(self.device),
+                     "steps": req.pflow_steps or self.config.pflow.steps,
+                     "guidance": FROM_CONFIG if guidance is None else guidance}  # fmt: skip
+            z1, n = self.pflow.sample(text, uncond, generator=gen, **pflow,
+                                      **person_text(self, req.person_prompts, 0, b))  # fmt: skip
+            nfe += n
+            if num_people > 1 and not any(req.person_prompts):  # worded like a real couple
+                couples = couple_rows(self, text, contact or [None] * b, t, gen)
+            if couples is not None:
+                z1, n = start_leaders(self, z1, couples, text, uncond, gen, **pflow)
+                nfe += n
+            latents = [z1]
         reencode = self.config.sflow.reencode_context and num_people > 1
         placed = None  # per scene, the frame people 2..N are generated in (re-encoding)
         context = list(latents)
@@ -358,6 +361,12 @@ class UMFPipeline:
                 pflow_guidance=guidance, mirror=mirror,
             )  # fmt: skip
             nfe += n
+            if k == 1 and couples is not None:
+                steps = req.sflow_steps or self.config.sflow.steps_for(num_people)
+                scale = self.config.sflow.guidance if guidance is None else guidance
+                w, n = start_partners(self, w, couples, prev, mask, text, uncond, gen, steps,
+                                      scale)  # fmt: skip
+                nfe += n
             latents.append(w)
             if k < num_people - 1:  # someone follows: w joins the context
                 context.append(self._encode(self.decode(w, t, reaction=True)) if reencode else w)

@@ -14,8 +14,11 @@ pelvis's mean floor velocity in person 1's frame, (x, z) in m/s (``velocity_*``)
 a person whose relation answers person 1 (a bow back, a response), how many frames after
 person 1's their action starts in the whole scene (``lag_*``,
 :func:`umf.data.relations.action_onset`; 0 for everybody else), and where the person's
-pelvis starts on the floor, (x, z) in m in person 1's frame (``start_*``). They are derived
-from the training data and carry its licence.
+pelvis starts on the floor, (x, z) in m in person 1's frame (``start_*``). Beside them, the
+real takes whose people touch (a salsa couple) are kept whole, both people of a crop every
+second (``takes_*``, (N, 2, p, r)), with the rows of their take's captions (``take_caption_*``,
+(N, C), -1 where a take has fewer): ``sflow.warm_take`` starts such a couple from one of
+them. They are derived from the training data and carry its licence.
 ``umf train reactions`` (:func:`umf.train.reactions.build_reaction_bank`) writes them.
 """
 
@@ -43,6 +46,8 @@ PACE_FLOOR = 0.5
 VELOCITY = "velocity_"
 LAG = "lag_"
 START = "start_"
+TAKE = "takes_"  # both people of a crop of a touching real take (N, 2, p, r) ...
+TAKE_CAPTION = "take_caption_"  # ... and its take's caption rows (N, C), -1: none
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
@@ -85,6 +90,11 @@ class ReactionBank:
     # per length, each reaction's first-frame pelvis on the floor (N, 2), x and z in m in
     # person 1's frame (+x: person 1's left), for a reaction on a given side; may be empty
     starts: dict[int, Tensor] = field(default_factory=dict)
+    # per length, crops of the real takes whose people touch, both people (N, 2, p, r) on
+    # the VAE's scale, person 1's frame, and their take's captions as unit sentence
+    # embeddings (N, C, D), NaN rows where a take has fewer than C; may be empty
+    takes: dict[int, Tensor] = field(default_factory=dict)
+    take_texts: dict[int, Tensor] = field(default_factory=dict)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
@@ -100,14 +110,21 @@ class ReactionBank:
         tensors |= {f"{LAG}{k}": v for k, v in self.lags.items()}  # whole frames: exact in fp16
         tensors |= {f"{START}{k}": v for k, v in self.starts.items()}
         tensors = {k: v.to(torch.float16) for k, v in tensors.items()}
-        if self.texts:
-            lengths = sorted(self.texts)
-            every = torch.cat([self.texts[k].to(torch.float16) for k in lengths])
+        tensors |= {f"{TAKE}{k}": v.to(torch.float16) for k, v in self.takes.items()}
+        if self.texts or self.take_texts:  # one table for the reactions' and takes' captions
+            parts = [(CAPTION, k, self.texts[k], None) for k in sorted(self.texts)]
+            for k in sorted(self.take_texts):
+                e = self.take_texts[k]
+                have = ~e.isnan().any(-1)  # (N, C)
+                parts.append((TAKE_CAPTION, k, e[have], have))
+            every = torch.cat([e.to(torch.float16) for _, _, e, _ in parts])
             table, rows = torch.unique(every, dim=0, return_inverse=True)
             tensors[CAPTIONS] = table
-            for k, part in zip(lengths, rows.split([len(self.texts[k]) for k in lengths]),
-                               strict=True):  # fmt: skip
-                tensors[f"{CAPTION}{k}"] = part.to(torch.int32)
+            for (name, k, _, have), part in zip(parts, rows.split([len(e) for _, _, e, _ in parts]),
+                                                strict=True):  # fmt: skip
+                if have is not None:  # a take's captions: its rows, -1 past the last
+                    part = torch.full(have.shape, -1, dtype=part.dtype).masked_scatter(have, part)
+                tensors[f"{name}{k}"] = part.to(torch.int32)
         save_tensors_atomic({k: v.contiguous() for k, v in tensors.items()}, path)
         path.chmod(0o644)
         return path
@@ -133,7 +150,18 @@ class ReactionBank:
                         raise ValueError(f"{k} indexes no caption table")
                     texts[int(k.removeprefix(CAPTION))] = table[rows.long()].float()
             velocities, lags = _per_length(raw, VELOCITY), _per_length(raw, LAG)
-            starts = _per_length(raw, START)
+            starts, takes = _per_length(raw, START), _per_length(raw, TAKE)
+            take_texts = {}
+            for k, rows in raw.items():
+                if k.startswith(TAKE_CAPTION):
+                    integer = rows.dtype in (torch.int32, torch.int64) and rows.ndim == 2
+                    if table is None or not integer or (rows < -1).any() or (
+                            len(rows) and rows.max() >= len(table)):  # fmt: skip
+                        raise ValueError(f"{k} indexes no caption table")
+                    e = table[rows.clamp_min(0).long()].float()
+                    take_texts[int(k.removeprefix(TAKE_CAPTION))] = e.masked_fill(
+                        (rows < 0)[..., None], torch.nan
+                    )
         except (OSError, ValueError, RuntimeError, IndexError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -151,9 +179,33 @@ class ReactionBank:
                 if z is None or v.shape != (len(z), *row) or not torch.isfinite(v).all():
                     raise UMFError(f"{path}: {name} of {frames} frames do not match its "
                                    "reactions")  # fmt: skip
+        for frames, z in takes.items():
+            e = take_texts.get(frames)
+            fits = (
+                z.ndim == 4 and z.shape[1] == 2 and (shape is None or z.shape[2:] == tuple(shape))
+            )
+            if not fits or not torch.isfinite(z).all() or e is None or len(e) != len(z):
+                raise UMFError(f"{path}: takes of {frames} frames do not fit the model")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents, texts, velocities, lags, starts)
+        return cls(latents, texts, velocities, lags, starts, takes, take_texts)
+
+    def pick_take(self, frames: int, prompt: Tensor,
+                  generator: Generators = None) -> tuple[int, Tensor] | None:  # fmt: skip
+        """For each row of ``prompt`` (B, D) unit sentence embeddings, a crop of a touching
+        real take: the stored length nearest ``frames`` it is of and its index (B,) there,
+        drawn uniformly with row i's generator among the crops of the takes whose captions
+        come nearest the prompt (ties within ``SAME_SIDE``). None for a bank without
+        takes."""
+        if not self.takes:
+            return None
+        length = min(self.takes, key=lambda k: (abs(k - frames), k))
+        e = self.take_texts[length].to(prompt.device)  # (N, C, D)
+        sims = torch.einsum("bd,ncd->bnc", prompt.float(), e.nan_to_num(0.0))
+        sims = sims.masked_fill(e.isnan().any(-1)[None], -torch.inf).amax(-1)  # (B, N)
+        best = sims >= sims.amax(dim=1, keepdim=True) - SAME_SIDE
+        score = randn(tuple(sims.shape), generator, device=prompt.device)
+        return length, score.masked_fill(~best, -torch.inf).argmax(dim=1)
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""

@@ -131,6 +131,10 @@ class TextFeatures:
     def to(self, device: str | torch.device) -> TextFeatures:
         return TextFeatures(self.tokens.to(device), self.mask.to(device), self.pooled.to(device))
 
+    def rows(self, index: Tensor) -> TextFeatures:
+        """The prompts ``index`` (R,) of the batch."""
+        return TextFeatures(self.tokens[index], self.mask[index], self.pooled[index])
+
 
 def masked_mean(x: Tensor, mask: Tensor) -> Tensor:
     """Mean of ``x`` (B, L, D) over the True positions of ``mask`` (B, L)."""

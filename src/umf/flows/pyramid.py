@@ -447,6 +447,42 @@ def sample_pyramid(
     return ODESolution(x, nfe)
 
 
+def finest_warm_state(proposal: Tensor, eps: Tensor, window: StageWindow, layout: Layout,
+                      t_local: float) -> Tensor:  # fmt: skip
+    """The finest stage's state at local time ``t_local`` on its training path towards
+    ``proposal`` (B, p, r), full resolution: what :func:`pyramid_training_sample` puts
+    there had the motion been ``proposal``, with noise ``eps`` (Eqs. 6-7, e = 1)."""
+    if not 0.0 < t_local < 1.0:
+        raise ValueError(f"a warm start needs 0 < t < 1, got {t_local}")
+    if window.level != 0:
+        raise ValueError(f"a warm start enters the finest stage, not stage {window.stage}")
+    start, end = stage_endpoints(proposal, eps, window, layout)
+    return interpolate(start, end, t_local)
+
+
+def sample_finest_from(
+    velocity: Velocity,
+    proposal: Tensor,
+    config: PyramidConfig,
+    t_local: float,
+    *,
+    steps: int,
+    method: Method = "euler",
+    generator: Generators = None,
+) -> ODESolution:
+    """Full-resolution latents sampled again from ``proposal`` (B, p, r): enter the finest
+    stage at ``t_local`` on the path towards it (:func:`finest_warm_state`) and integrate
+    the rest of that stage with the remaining share of its ``steps`` (at least one). The
+    coarser stages are skipped: the proposal already says what they would have."""
+    window = config.windows[-1]
+    eps = randn(proposal.shape, generator, device=proposal.device, dtype=proposal.dtype)
+    x = finest_warm_state(proposal, eps, window, config.layout, t_local)
+    stage = torch.full((x.shape[0],), window.stage, dtype=torch.long, device=x.device)
+    n = max(1, round(steps * (1.0 - t_local)))
+    return integrate(_local_field(velocity, window, stage, {}), x, steps=n, t0=t_local,
+                     method=method)  # fmt: skip
+
+
 def _local_field(
     velocity: Velocity, window: StageWindow, stage: Tensor, cond: Mapping[str, Any]
 ) -> Callable[..., Tensor]:

@@ -23,6 +23,7 @@ from umf.flows import (
     flow_matching_loss,
     initial_noise,
     pyramid_training_sample,
+    sample_finest_from,
     sample_pyramid,
 )
 from umf.flows.noise import Generators
@@ -247,9 +248,15 @@ class PFlow(nn.Module):
         generator: Generators = None,
         person_text: TextFeatures | None = None,
         person_present: Tensor | None = None,
+        warm: Tensor | None = None,
+        warm_t: float = 0.0,
     ) -> tuple[Tensor, int]:
         """Generate ``num_samples`` latents per prompt: (B * num_samples, p, r) on the VAE's
         scale, and the NFE.
+
+        ``warm`` (B * num_samples, p, r) on the VAE's scale and ``warm_t`` in (0, 1): sample
+        again from a proposal instead, entering the finest stage at local time ``warm_t`` on
+        the path towards it (:func:`umf.flows.pyramid.sample_finest_from`).
 
         ``person_text`` (B rows) / ``person_present`` (B,): person 1's own prompt (a model
         with per-person prompts); a guided stage then guides the scene prompt by its scale
@@ -299,6 +306,13 @@ class PFlow(nn.Module):
             field = _stage_field(self.net, scales, cond, uncond, scene, self.cfg.person_guidance,
                                  own_alone)  # fmt: skip
             k = self.pyramid.num_stages
+            per_stage = resolve_steps(self.cfg.steps if steps is None else steps, k)
+            if warm is not None:
+                z, nfe = sample_finest_from(field, self.latent_norm.normalize(warm),
+                                            self.pyramid, warm_t, steps=per_stage[-1],
+                                            method=solver or self.cfg.solver,  # type: ignore[arg-type]
+                                            generator=generator)  # fmt: skip
+                return self.latent_norm.denormalize(z), nfe
             noise = initial_noise(
                 self.pyramid,
                 b,
@@ -311,7 +325,7 @@ class PFlow(nn.Module):
                 field,
                 noise,
                 self.pyramid,
-                steps=resolve_steps(self.cfg.steps if steps is None else steps, k),
+                steps=per_stage,
                 method=solver or self.cfg.solver,  # type: ignore[arg-type]
                 generator=generator,
             )

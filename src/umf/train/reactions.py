@@ -12,13 +12,15 @@ from tqdm import tqdm
 
 from umf.coverage import embed
 from umf.data.corpus import Corpus
+from umf.data.relations import measured_relation
 from umf.errors import UMFError
 from umf.reaction_bank import ReactionBank
-from umf.representation import floor_start
-from umf.train.datasets import SceneDataset
+from umf.representation import canonicalize_features, floor_start
+from umf.train.datasets import SceneDataset, _clip_crop
 from umf.warm_start import floor_velocity, onsets
 
 STEP = 15  # feature frames between stored lengths: the evaluation's --length-step
+TAKE_STEP = 30  # feature frames between the starts of a touching take's stored crops
 
 
 class NoReactions(UMFError):
@@ -46,7 +48,9 @@ def build_reaction_bank(
     their scene's caption embedded by the model's text encoder, their pelvis's mean floor
     velocity, where they start and, for people who answer person 1, how many frames after
     person 1's their action starts in the whole scene (a crop may cut either onset;
-    :func:`answer_waits`); at most ``per_length`` per length, drawn with ``seed``.
+    :func:`answer_waits`); at most ``per_length`` per length, drawn with ``seed``; and both
+    people of the real takes whose people touch, every :data:`TAKE_STEP` frames
+    (:func:`touching_crops`).
     A length no scene is long enough for is left out; a corpus without multi-person train
     scenes raises :class:`NoReactions`."""
     corpus = Corpus.load(corpus_dir)
@@ -61,6 +65,8 @@ def build_reaction_bank(
     velocities: dict[int, torch.Tensor] = {}
     lags: dict[int, torch.Tensor] = {}
     starts: dict[int, torch.Tensor] = {}
+    takes: dict[int, torch.Tensor] = {}
+    take_texts: dict[int, torch.Tensor] = {}
     whole_lags: dict[str, list[int]] = {}  # per scene or take, its people's delays
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
@@ -92,9 +98,42 @@ def build_reaction_bank(
         starts[frames] = floor_start(real)
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
+        crops, take_captions = touching_crops(ds, frames)
+        if crops:
+            x = pipe.normalizer.normalize(torch.stack(crops)).to(pipe.device)  # (N, 2, T, F)
+            whole = torch.ones(x.shape[0] * 2, frames, dtype=torch.bool, device=x.device)
+            pairs = zip(x.flatten(0, 1).split(256), whole.split(256), strict=True)
+            z = torch.cat([pipe.vae.encode(c, m)[0].cpu() for c, m in pairs])
+            takes[frames] = z.reshape(len(crops), 2, *z.shape[1:])
+            most = max(len(c) for c in take_captions)
+            distinct = sorted({c for cs in take_captions for c in cs})
+            table = embed(pipe.text_encoder, distinct)
+            e = torch.full((len(crops), most, table.shape[1]), torch.nan)
+            for i, cs in enumerate(take_captions):
+                e[i, : len(cs)] = table[[distinct.index(c) for c in cs]]
+            take_texts[frames] = e
     if not latents:
         raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
-    return ReactionBank(latents, texts, velocities, lags, starts)
+    return ReactionBank(latents, texts, velocities, lags, starts, takes, take_texts)
+
+
+def touching_crops(ds: SceneDataset, frames: int) -> tuple[list[torch.Tensor], list[list[str]]]:
+    """People 1 and 2 of each real take the dataset serves whose people touch (hands near in
+    at least a quarter of the frames, :func:`umf.data.relations.measured_relation`), cropped
+    to ``frames`` every :data:`TAKE_STEP` frames in person 1's frame, neither mirrored nor
+    carried on: features (2, frames, 262) de-normalised, and each crop's take's captions."""
+    crops, captions, seen = [], [], set()
+    for kind, clip, tf in ds.items:
+        if kind != "clip" or clip.id in seen or clip.num_frames - 1 < frames:
+            continue
+        seen.add(clip.id)
+        if not clip.captions or not measured_relation(clip.joints[:2])["touching"]:
+            continue
+        for start in range(0, clip.num_frames - 1 - frames + 1, TAKE_STEP):
+            whole = _clip_crop(clip, tf, range(2), start, frames)
+            crops.append(canonicalize_features(torch.as_tensor(whole)).float())
+            captions.append(sorted(set(clip.captions)))
+    return crops, captions
 
 
 def answer_waits(ds: SceneDataset, index: int) -> list[int]:
