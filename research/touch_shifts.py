@@ -5,10 +5,10 @@
 Every real multi-person take of the corpus whose people touch, cut into crops of
 ``--seconds`` every half of that: person 2's floor shift from the separation as the
 pipeline applies it to a prompt worded like the take's caption (the model's vocabulary
-``contact``), against the earlier rule, which read the take's 5th-percentile closeness
-(plus the fit's margin) as a bound at every frame. A rule that lets real partners stay
-where they are shifts these crops by nothing, or by the centimetre or two the TOUCH_FLOOR
-asks of the rare frame where two joints overlap.
+``contact``), against the rule before 20261213, which held the closest takes' 5th
+percentiles (joints, plus the fit's margin; pelvises) at every frame. A rule that lets real
+partners stay where they are shifts these crops by nothing, or by the centimetre the
+TOUCH_FLOOR asks of the rare frame where two joints come within 2 cm.
 """
 
 from __future__ import annotations
@@ -41,7 +41,7 @@ def main() -> None:
     from umf.data.corpus import Corpus
     from umf.data.relations import pair_closeness
     from umf.pipeline import default_model_dir
-    from umf.separation import FIT_MARGIN, separate_people, touching_distances
+    from umf.separation import FIT_MARGIN, MIN_DISTANCE, separate_people, touching_distances
 
     corpus = Corpus.load(args.corpus)
     vocab = Vocabulary.load(args.model or default_model_dir())
@@ -52,8 +52,8 @@ def main() -> None:
             continue
         contact = next(vocab.contact[c] for c in clip.captions if c in vocab.contact)
         now_kw = touching_distances(contact)
-        before_kw = {"min_distance": now_kw["min_distance"], "smallest": True,
-                     "contact_distance": now_kw["contact_distance"] + FIT_MARGIN}  # fmt: skip
+        before_kw = {"min_distance": min(MIN_DISTANCE, contact["pelvis_m"]), "smallest": True,
+                     "contact_distance": contact["closest_m"] + FIT_MARGIN}  # fmt: skip
         now, before = [], []
         for crop in crops(clip.joints[:2].astype(np.float64), round(args.seconds * clip.fps) + 1):
             if pair_closeness(crop)["hands_near"] < 0.25:

@@ -117,8 +117,8 @@ def test_takes_round_trip_and_a_prompt_draws_a_crop_of_its_nearest_take(tiny, tm
     seen = set()
     for s in range(20):
         gen = [torch.Generator().manual_seed(s), torch.Generator().manual_seed(100 + s)]
-        length, idx = back.pick_take(31, prompts, gen)
-        assert length == 30 and idx[0] in (0, 1, 2) and idx[1] in (3, 4)
+        length, idx, own = back.pick_take(31, prompts, gen)
+        assert length == 30 and idx[0] in (0, 1, 2) and idx[1] in (3, 4) and bool(own.all())
         seen.add(int(idx[0]))
         alone = back.pick_take(31, prompts[:1], [torch.Generator().manual_seed(s)])
         assert int(alone[1][0]) == int(idx[0])  # a row's draw does not depend on its batch
@@ -223,3 +223,18 @@ def test_a_warm_take_outside_0_to_1_is_refused(value):
     with pytest.raises(UMFError, match="warm_take"):
         check_config_values(set_option(tiny_config(), f"sflow.warm_take={value}"))
     check_config_values(set_option(tiny_config(), "sflow.warm_take=0.7"))
+
+
+def test_a_take_too_short_for_the_length_asked_lends_no_other(tiny):
+    """A handshake stored at 30 frames only, asked for 60: the salsa crops stored there are
+    nearer the prompt than nothing, but they are not its take."""
+    from umf.coverage import embed
+
+    pipe = UMFPipeline.from_pretrained(tiny, text_encoder=FakeText())
+    bank = _takes_bank(pipe)
+    salsa = bank.take_texts[30][:1]  # only the salsa take is long enough for 60 frames
+    bank.takes[60], bank.take_texts[60] = bank.takes[30][:1], salsa
+    prompts = embed(pipe.text_encoder, ["two people shake hands", "a couple dances"])
+    length, _, own = bank.pick_take(60, prompts, [torch.Generator(), torch.Generator()])
+    assert length == 60 and own.tolist() == [False, True]
+    assert bool(bank.pick_take(30, prompts)[2].all())

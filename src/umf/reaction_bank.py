@@ -191,21 +191,29 @@ class ReactionBank:
         return cls(latents, texts, velocities, lags, starts, takes, take_texts)
 
     def pick_take(self, frames: int, prompt: Tensor,
-                  generator: Generators = None) -> tuple[int, Tensor] | None:  # fmt: skip
+                  generator: Generators = None) -> tuple[int, Tensor, Tensor] | None:  # fmt: skip
         """For each row of ``prompt`` (B, D) unit sentence embeddings, a crop of a touching
-        real take: the stored length nearest ``frames`` it is of and its index (B,) there,
-        drawn uniformly with row i's generator among the crops of the takes whose captions
-        come nearest the prompt (ties within ``SAME_SIDE``). None for a bank without
-        takes."""
+        real take: the stored length nearest ``frames`` it is of, its index (B,) there, drawn
+        uniformly with row i's generator among the crops of the takes whose captions come
+        nearest the prompt (ties within ``SAME_SIDE``), and (B,) whether those are the takes
+        nearest the prompt at any length (a take too short for ``frames``, such as a
+        handshake asked for 4 s, leaves a longer one nearest there: not its own). None for a
+        bank without takes."""
         if not self.takes:
             return None
+        best = {}  # per length, each row's crops and how near their captions come
+        for k, e in self.take_texts.items():
+            e = e.to(prompt.device)  # (N, C, D)
+            sims = torch.einsum("bd,ncd->bnc", prompt.float(), e.nan_to_num(0.0))
+            best[k] = sims.masked_fill(e.isnan().any(-1)[None], -torch.inf).amax(-1)  # (B, N)
         length = min(self.takes, key=lambda k: (abs(k - frames), k))
-        e = self.take_texts[length].to(prompt.device)  # (N, C, D)
-        sims = torch.einsum("bd,ncd->bnc", prompt.float(), e.nan_to_num(0.0))
-        sims = sims.masked_fill(e.isnan().any(-1)[None], -torch.inf).amax(-1)  # (B, N)
-        best = sims >= sims.amax(dim=1, keepdim=True) - SAME_SIDE
+        sims = best[length]
+        top = sims.amax(dim=1)
+        anywhere = torch.stack([s.amax(dim=1) for s in best.values()], dim=1).amax(dim=1)
+        near = sims >= top[:, None] - SAME_SIDE
         score = randn(tuple(sims.shape), generator, device=prompt.device)
-        return length, score.masked_fill(~best, -torch.inf).argmax(dim=1)
+        idx = score.masked_fill(~near, -torch.inf).argmax(dim=1)
+        return length, idx, top >= anywhere - SAME_SIDE
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""

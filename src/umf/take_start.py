@@ -36,8 +36,9 @@ def couple_rows(
 ) -> tuple[Tensor, Tensor] | None:
     """The rows of a batch whose prompt is worded like a touching take, and for each a crop
     of those takes: both people's latents (R, 2, p, r) on the VAE's scale, drawn with the
-    row's generator (a list, one per row). None where no row has one, the model sets no
-    ``sflow.warm_take`` or its bank holds no takes."""
+    row's generator (a list, one per row). A row whose take is too short for ``frames``
+    has none. None where no row has one, the model sets no ``sflow.warm_take`` or its bank
+    holds no takes."""
     bank = pipe.reactions
     if not pipe.config.sflow.warm_take or bank is None or not bank.takes:
         return None
@@ -45,8 +46,11 @@ def couple_rows(
     if not len(rows):
         return None
     prompt = torch.nn.functional.normalize(text.pooled[rows].float(), dim=-1)
-    length, idx = bank.pick_take(frames, prompt, [generator[i] for i in rows.tolist()])
-    return rows, bank.takes[length][idx.cpu()].to(pipe.device)
+    length, idx, own = bank.pick_take(frames, prompt, [generator[i] for i in rows.tolist()])
+    own = own.cpu()
+    if not bool(own.any()):
+        return None
+    return rows[own], bank.takes[length][idx.cpu()[own]].to(pipe.device)
 
 
 def start_leaders(
