@@ -479,11 +479,11 @@ def clean_up(
     labels (N, T, 4) before anything is written, in this order:
 
     1. ``anchor`` (only with ``fit``): people with ``clean`` moved back by the slide of a
-       planted foot (:mod:`umf.anchoring`);
+       planted foot (:mod:`umf.anchoring`), with ``contact`` all together by their mean;
     2. ``separate``: people 2..N shifted rigidly apart on the floor (:mod:`umf.separation`),
-       judged on the anchored paths; with ``contact`` (``{"closest_m", "pelvis_m"}``: how
-       close the real takes the prompt is worded like bring their people, from the model's
-       vocabulary) only as far as those takes keep them, so partners may touch;
+       judged on the anchored paths; with ``contact`` (``{"closest_m", "pelvis_m"}``: the
+       prompt is worded like a real take whose people touch, from the model's vocabulary)
+       only as far as real partners ever keep apart, so partners may touch;
     3. ``fit``: one rigid body each, planted feet pinned and people with ``clean`` kept off
        the ``floor`` (:mod:`umf.kinematics`).
 
@@ -505,7 +505,11 @@ def place_people(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Steps 1 and 2 of :func:`clean_up` for one scene: the joints (N, T, 22, 3) anchored
     (with ``anchor``) and the (N, 3) separation shifts, not yet added to them."""
-    start = anchor_people(decoded, contacts, floor, clean) if anchor else decoded
+    start = (
+        anchor_people(decoded, contacts, floor, clean, together=bool(contact))
+        if anchor
+        else decoded
+    )
     shifts = np.zeros((decoded.shape[0], 3), dtype=np.float32)
     if separate and decoded.shape[0] > 1:
         _, shifts = separate_people(start, **touching_distances(contact))
