@@ -49,7 +49,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261212"
+NAME = "umf-small-bandai-20261213"
 PLACE_WEIGHT = 0.1
 
 
@@ -160,7 +160,7 @@ NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_s
          "sflow.warm_shortlist=64", "pflow.person_composition=and",
          "sflow.own_warm=0.5", "sflow.warm_side=true", "sflow.warm_timing=8",
          "sflow.warm_together=0.8", "vae.pin_leader_start=true", "sflow.warm_play=true",
-         "sflow.warm_apart=true"]  # fmt: skip
+         "sflow.warm_apart=true", "sflow.warm_take=0.7"]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -269,7 +269,9 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     # after person 1 as it did in its scene; results/umf-small-bandai-20261211: person 1's
     # fused path starts over the origin, and people travelling with them keep their pace;
     # results/umf-small-bandai-20261212: their partner is played at their pace, and person
-    # k >= 3 keeps off the spots of people 2..k - 1
+    # k >= 3 keeps off the spots of people 2..k - 1; results/umf-small-bandai-20261213: a
+    # couple worded like a touching take is finished from one of its crops (the bank keeps
+    # the touching takes whole)
     name = variant("name", work / "runs" / "gait" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]

@@ -1,4 +1,4 @@
-"""The pipeline's clean-up of a batch of scenes (`umf.pipeline.clean_up_scenes`): scene by
+"""The pipeline's clean-up of a batch of scenes (`umf.clean_up.clean_up_scenes`): scene by
 scene, or every person of every scene in one fit (what a GPU does), with the same result."""
 
 from __future__ import annotations
@@ -8,7 +8,7 @@ import pytest
 import torch
 
 from conftest import MODULE
-from umf.pipeline import clean_up, clean_up_scenes
+from umf.clean_up import clean_up, clean_up_scenes
 
 
 @pytest.fixture(scope=MODULE)
@@ -55,7 +55,7 @@ def test_merged_fit_matches_scene_by_scene(batch, clean):
 
 
 def test_a_gpu_device_merges_and_per_person_flags_follow_each_scene(batch, monkeypatch):
-    import umf.pipeline as P
+    import umf.clean_up as P
 
     decoded, contacts = batch
     calls = []

@@ -22,10 +22,12 @@ from typing import Any
 import numpy as np
 import torch
 
-from umf.anchoring import anchor_people
+from umf.clean_up import clean_up as clean_up  # re-exported: the clean-up's home is umf.clean_up
+from umf.clean_up import clean_up_scenes
+from umf.clean_up import delivered_joints as delivered_joints
+from umf.clean_up import place_people as place_people
 from umf.config import MULTI_PERSON, SINGLE_PERSON, UMFConfig
 from umf.errors import UMFError
-from umf.kinematics import Bodies, fit_bodies
 from umf.model_checks import (
     MAX_MODEL_BYTES,
     check_config_values,
@@ -55,9 +57,9 @@ from umf.representation import (
 )
 from umf.reroll import reroll_person
 from umf.scene import Scene
-from umf.separation import separate_people, touching_distances
+from umf.separation import touching_distances as touching_distances  # re-exported
 from umf.streams import fresh_seed, scene_generators
-from umf.take_start import couple_rows, start_leaders, start_partners
+from umf.take_start import start_couples, start_partners
 from umf.text import respell_prompt
 from umf.validation import (
     MAX_PEOPLE,
@@ -330,18 +332,16 @@ class UMFPipeline:
             t = self._frames(req.seconds)
             token = MULTI_PERSON if num_people > 1 else SINGLE_PERSON
             dataset = torch.full((b,), token, dtype=torch.long)
-            pflow = {"dataset": dataset.to(self.device),
-                     "steps": req.pflow_steps or self.config.pflow.steps,
-                     "guidance": FROM_CONFIG if guidance is None else guidance}  # fmt: skip
+            pflow = dict(dataset=dataset.to(self.device),
+                         steps=req.pflow_steps or self.config.pflow.steps,
+                         guidance=FROM_CONFIG if guidance is None else guidance,  # per stage
+                         )  # fmt: skip
             z1, n = self.pflow.sample(text, uncond, generator=gen, **pflow,
                                       **person_text(self, req.person_prompts, 0, b))  # fmt: skip
-            nfe += n
             if num_people > 1 and not any(req.person_prompts):  # worded like a real couple
-                couples = couple_rows(self, text, contact or [None] * b, t, gen)
-            if couples is not None:
-                z1, n = start_leaders(self, z1, couples, text, uncond, gen, **pflow)
-                nfe += n
-            latents = [z1]
+                z1, couples, m = start_couples(self, z1, text, uncond, gen, contact, t, pflow)
+                n += m
+            latents, nfe = [z1], nfe + n
         reencode = self.config.sflow.reencode_context and num_people > 1
         placed = None  # per scene, the frame people 2..N are generated in (re-encoding)
         context = list(latents)
@@ -350,23 +350,20 @@ class UMFPipeline:
             placed = [leader_frame(f) for f in lead]
             moved = [transform_features(f, tf) for f, tf in zip(lead, placed, strict=True)]
             context = [self._encode(torch.stack(moved))]
+        sflow = {
+            "steps": req.sflow_steps or self.config.sflow.steps_for(num_people),
+            "guidance": self.config.sflow.guidance if guidance is None else guidance,
+        }
         for k in range(1, num_people):
             prev = torch.stack(context, dim=1)
             mask = torch.ones(prev.shape[:2], dtype=torch.bool, device=self.device)
-            w, n = sample_added(
-                self, prev, mask, text, uncond, t,
-                steps=req.sflow_steps or self.config.sflow.steps_for(num_people),
-                guidance=self.config.sflow.guidance if guidance is None else guidance,
-                generator=gen, own=person_text(self, req.person_prompts, k, b),
-                pflow_guidance=guidance, mirror=mirror,
-            )  # fmt: skip
+            w, n = sample_added(self, prev, mask, text, uncond, t, generator=gen,
+                                own=person_text(self, req.person_prompts, k, b),
+                                pflow_guidance=guidance, mirror=mirror, **sflow)  # fmt: skip
+            if k == 1 and couples is not None:  # person 2 from the couple's take too
+                w, m = start_partners(self, w, couples, prev, mask, text, uncond, gen, **sflow)
+                n += m
             nfe += n
-            if k == 1 and couples is not None:
-                steps = req.sflow_steps or self.config.sflow.steps_for(num_people)
-                scale = self.config.sflow.guidance if guidance is None else guidance
-                w, n = start_partners(self, w, couples, prev, mask, text, uncond, gen, steps,
-                                      scale)  # fmt: skip
-                nfe += n
             latents.append(w)
             if k < num_people - 1:  # someone follows: w joins the context
                 context.append(self._encode(self.decode(w, t, reaction=True)) if reencode else w)
@@ -463,112 +460,6 @@ class UMFPipeline:
 def default_model_dir() -> Path:
     """Where the bundled model lives inside the installed package."""
     return Path(__file__).parent / "assets" / "model"
-
-
-def clean_up(
-    decoded: np.ndarray,
-    contacts: np.ndarray,
-    floor: float = 0.0,
-    clean: bool | list[bool] = True,
-    anchor: bool = True,
-    separate: bool = True,
-    fit: bool = True,
-    contact: dict | None = None,
-) -> tuple[np.ndarray, Bodies | None]:
-    """What the pipeline does to one scene's decoded joints (N, T, 22, 3) with contact
-    labels (N, T, 4) before anything is written, in this order:
-
-    1. ``anchor`` (only with ``fit``): people with ``clean`` moved back by the slide of a
-       planted foot (:mod:`umf.anchoring`), with ``contact`` all together by their mean;
-    2. ``separate``: people 2..N shifted rigidly apart on the floor (:mod:`umf.separation`),
-       judged on the anchored paths; with ``contact`` (``{"closest_m", "pelvis_m"}``: the
-       prompt is worded like a real take whose people touch, from the model's vocabulary)
-       only as far as real partners ever keep apart, so partners may touch;
-    3. ``fit``: one rigid body each, planted feet pinned and people with ``clean`` kept off
-       the ``floor`` (:mod:`umf.kinematics`).
-
-    Returns the (N, 3) separation shifts and the bodies (None without ``fit``).
-    """
-    shifts, bodies = clean_up_scenes(decoded[None], contacts[None], floor, clean, anchor,
-                                     separate, fit, [contact])  # fmt: skip
-    return shifts[0], bodies[0]
-
-
-def place_people(
-    decoded: np.ndarray,
-    contacts: np.ndarray,
-    floor: float = 0.0,
-    clean: bool | list[bool] = True,
-    anchor: bool = True,
-    separate: bool = True,
-    contact: dict | None = None,
-) -> tuple[np.ndarray, np.ndarray]:
-    """Steps 1 and 2 of :func:`clean_up` for one scene: the joints (N, T, 22, 3) anchored
-    (with ``anchor``) and the (N, 3) separation shifts, not yet added to them."""
-    start = (
-        anchor_people(decoded, contacts, floor, clean, together=bool(contact))
-        if anchor
-        else decoded
-    )
-    shifts = np.zeros((decoded.shape[0], 3), dtype=np.float32)
-    if separate and decoded.shape[0] > 1:
-        _, shifts = separate_people(start, **touching_distances(contact))
-    return start, shifts
-
-
-def clean_up_scenes(
-    decoded: np.ndarray,
-    contacts: np.ndarray,
-    floor: float = 0.0,
-    clean: bool | list[bool] = True,
-    anchor: bool = True,
-    separate: bool = True,
-    fit: bool = True,
-    contact: list[dict | None] | None = None,
-    device: str | torch.device | None = None,
-    merge: bool | None = None,
-) -> tuple[np.ndarray, list[Bodies | None]]:
-    """:func:`clean_up` for B scenes (B, N, T, 22, 3), contacts (B, N, T, 4), ``contact``
-    one entry per scene: the (B, N, 3) shifts and each scene's bodies.
-
-    Anchoring and separation run scene by scene. ``merge`` (default: on a GPU ``device``)
-    fits every person of every scene in one solve on ``device``, thousands of poses at
-    once; otherwise the fit too runs scene by scene, which is faster on a CPU (merging 16
-    scenes took 1.4-1.6x the time here: the bigger systems leave the cache). Each person's
-    fit is its own either way (bone lengths, pins, floor are per person).
-    """
-    b, n = decoded.shape[:2]
-    near = [None] * b if contact is None else list(contact)
-    shifts = np.zeros((b, n, 3), dtype=np.float32)
-    placed = []
-    for i in range(b):
-        start, shifts[i] = place_people(decoded[i], contacts[i], floor, clean, anchor and fit,
-                                        separate, near[i])  # fmt: skip
-        placed.append(start + shifts[i][:, None, None, :])
-    if not fit:
-        return shifts, [None] * b
-    if merge is None:
-        merge = device is not None and torch.device(device).type == "cuda"
-    if not merge:
-        return shifts, [fit_bodies(p, c, floor, clean) for p, c in zip(placed, contacts,
-                                                                        strict=True)]  # fmt: skip
-    flags = [bool(clean)] * n if isinstance(clean, bool) else [bool(c) for c in clean]
-    every = fit_bodies(np.concatenate(placed), contacts.reshape(b * n, *contacts.shape[2:]),
-                       floor, flags * b, device=device)  # fmt: skip
-    people = [slice(i * n, (i + 1) * n) for i in range(b)]
-    return shifts, [Bodies(every.offsets[p], every.rotations[p], every.root[p]) for p in people]
-
-
-def delivered_joints(
-    raw: np.ndarray, contacts: np.ndarray, floor: float = 0.0, anchor: bool = True
-) -> np.ndarray:
-    """A generated scene's joints as the default pipeline hands them out, from its raw
-    decoded joints (N, T, 22, 3) and contact labels (N, T, 4): :func:`clean_up` with
-    separation and the fit, so evaluation can score a ``fit=False`` scene both raw and as
-    users receive it (``pipe(..., anchor=anchor)``).
-    """
-    _, bodies = clean_up(np.asarray(raw), np.asarray(contacts), floor, True, anchor)
-    return bodies.joints()
 
 
 class _TextDim:

@@ -53,6 +53,21 @@ def couple_rows(
     return rows[own], bank.takes[length][idx.cpu()[own]].to(pipe.device)
 
 
+def start_couples(
+    pipe: Any, z1: Tensor, text: Any, uncond: Any, generator: Any,
+    contact: Sequence[dict | None] | None, frames: int, pflow: dict[str, Any],
+) -> tuple[Tensor, tuple[Tensor, Tensor] | None, int]:  # fmt: skip
+    """Person 1's latents (B, p, r) with the rows worded like a touching take started from
+    one of its crops (:func:`couple_rows`, :func:`start_leaders`), those rows and crops (for
+    :func:`start_partners`; None: no row) and the NFE. ``contact``: per row, the prompt's
+    coverage contact (None: no row touches)."""
+    couples = couple_rows(pipe, text, contact or [None] * len(z1), frames, generator)
+    if couples is None:
+        return z1, None, 0
+    z1, nfe = start_leaders(pipe, z1, couples, text, uncond, generator, **pflow)
+    return z1, couples, nfe
+
+
 def start_leaders(
     pipe: Any, z1: Tensor, couples: tuple[Tensor, Tensor], text: Any, uncond: Any,
     generator: Any, **pflow: Any,
@@ -73,7 +88,7 @@ def start_leaders(
 
 def start_partners(
     pipe: Any, w: Tensor, couples: tuple[Tensor, Tensor], prev: Tensor, mask: Tensor,
-    text: Any, uncond: Any, generator: Any, steps: int, guidance: float | None,
+    text: Any, uncond: Any, generator: Any, *, steps: int, guidance: float | None,
 ) -> tuple[Tensor, int]:  # fmt: skip
     """Person 2's latents (B, p, r) with the couples' rows sampled again by the S-Flow from
     ``sflow.warm_take`` towards their take's person 2, beside person 1 (``prev`` (B, 1, p,
