@@ -340,7 +340,7 @@ def test_the_reactions_flow_tells_a_side_named_left_from_right(pipe):
 
 
 def test_a_salsa_couple_takes_hands_without_passing_through_each_other(pipe):
-    """"Two people dance salsa together." is worded like the touching takes: both people
+    """ "Two people dance salsa together." is worded like the touching takes: both people
     are finished from one of their crops (sflow.warm_take). Seeds 0-3 hold hands (wrists
     within 0.3 x stature) in at least 40 % of the frames at the median (20261212: 12 % over
     seeds 0-7; the real test and val takes 59 %), face each other, and their pelvises never
