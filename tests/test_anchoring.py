@@ -121,20 +121,22 @@ def test_smoothing_keeps_the_total_correction(bandai_clips, smooth):
 def test_people_held_together_move_as_one(bandai_clips):
     """A couple, one gliding 0.5 m and one standing: anchored one by one, the glider moves
     back and the gap between them changes; held together, both move by the mean of their
-    corrections and the gap is the decoder's at every frame. Beside a user's own motion,
-    held together, nobody moves."""
+    corrections and the gap is the decoder's at every frame. A third person, not held,
+    is anchored on its own; beside a user's own motion the couple is anchored one by one."""
     bow = _clip(bandai_clips, "dataset-1_bow_normal_001")[:30]
     glide = bow + np.linspace(0, 0.5, 30)[:, None, None] * np.array([1.0, 0.0, 0.0])
     partner = bow + np.array([0.0, 0.0, 0.6])
-    scene = np.stack([glide, partner])
-    contacts = np.stack([_contacts(glide), _contacts(partner)])
+    third = glide + np.array([0.0, 0.0, -0.8])
+    scene = np.stack([glide, partner, third])
+    contacts = np.stack([_contacts(glide), _contacts(partner), _contacts(third)])
     gap = scene[1, :, 0] - scene[0, :, 0]
     apart = A.anchor_people(scene, contacts)
     assert np.abs((apart[1, :, 0] - apart[0, :, 0]) - gap).max() > 0.3
-    held = A.anchor_people(scene, contacts, together=True)
+    held = A.anchor_people(scene, contacts, together=2)
     np.testing.assert_allclose(held[1, :, 0] - held[0, :, 0], gap, atol=1e-9)
     own = [A.anchor_feet(p, c)[1] for p, c in zip(scene, contacts, strict=True)]
-    np.testing.assert_allclose(held[0] - scene[0], np.mean(own, 0)[:, None, :] + 0 * held[0],
-                               atol=1e-9)  # fmt: skip
-    actor = A.anchor_people(scene, contacts, clean=[False, True], together=True)
-    assert np.array_equal(actor, scene)
+    np.testing.assert_allclose(held[0] - scene[0], np.broadcast_to(np.mean(own[:2], 0)[:, None],
+                               scene[0].shape), atol=1e-9)  # fmt: skip
+    np.testing.assert_allclose(held[2], apart[2], atol=1e-12)  # not held: its own correction
+    actor = A.anchor_people(scene, contacts, clean=[False, True, True], together=2)
+    np.testing.assert_allclose(actor, A.anchor_people(scene, contacts, clean=[False, True, True]))

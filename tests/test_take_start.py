@@ -207,8 +207,12 @@ def test_the_pipeline_starts_only_couples_worded_like_a_take_from_one(tiny, monk
 
     with torch.no_grad():
         person_1 = features_to_joints(pipe.decode(crops[:, 0], 30)).numpy()
+        person_2 = features_to_joints(pipe.decode(crops[:, 1], 30, reaction=True)).numpy()
     gap = [np.abs(couple.joints[0] - person_1[i]).max() for i in range(3)]
     assert min(gap) < 0.05 * np.abs(person_1).max()  # one of the take's crops, near enough
+    crop = int(np.argmin(gap))  # ... and person 2 is the same crop's person 2
+    gap_2 = [np.abs(couple.joints[1] - person_2[i]).max() for i in range(3)]
+    assert int(np.argmin(gap_2)) == crop and min(gap_2) < 0.05 * np.abs(person_2).max()
     assert couple.meta["nfe"] > plain[0].meta["nfe"]
     again = pipe(salsa, num_people=2, seconds=1.0, seed=3, fit=False, separate=False)[0]
     assert np.array_equal(couple.joints, again.joints)

@@ -82,25 +82,25 @@ def anchor_people(
     contacts: np.ndarray,
     floor: float = 0.0,
     clean: bool | list[bool] = True,
-    together: bool = False,
+    together: int = 0,
 ) -> np.ndarray:
     """:func:`anchor_feet` for a scene's people (N, T, 22, 3) with contacts (N, T, 4);
     people whose ``clean`` flag is False (a user's own motion) are returned as they are.
 
-    ``together``: people the prompt holds together (a salsa couple, hand in hand) move as
-    one, each by the mean of their corrections, so where they stand to each other is the
-    decoder's; beside a user's own motion, which does not move, they do not either. Anchored
-    one by one, a generated couple that held hands in 58 % of its frames (median of seeds
-    8-23) did in 48 % (results/umf-small-bandai-20261213)."""
+    ``together`` >= 2: the first ``together`` people are held together by the prompt (a
+    salsa couple, hand in hand) and move as one, each by the mean of their corrections, so
+    where they stand to each other is the decoder's; everyone else, and a couple beside a
+    user's own motion, is anchored one by one. Anchored one by one, a generated couple that
+    held hands in 58 % of its frames (median of seeds 8-23) did in 48 %
+    (results/umf-small-bandai-20261213)."""
     flags = [clean] * len(joints) if isinstance(clean, bool) else list(clean)
-    if not together:
-        return np.stack([anchor_feet(p, c, floor)[0] if use else np.asarray(p)
-                         for p, c, use in zip(joints, contacts, flags, strict=True)])  # fmt: skip
-    shifts = [anchor_feet(p, c, floor)[1] for p, c, use in zip(joints, contacts, flags,
-                                                               strict=True) if use]  # fmt: skip
-    if not shifts or not all(flags):
-        return np.asarray(joints).copy()
-    shift = np.mean(shifts, axis=0)
-    return (np.asarray(joints, dtype=np.float64) + shift[None, :, None, :]).astype(
-        np.asarray(joints).dtype
-    )
+    out = [anchor_feet(p, c, floor) if use else (np.asarray(p), None)
+           for p, c, use in zip(joints, contacts, flags, strict=True)]  # fmt: skip
+    held = range(min(together, len(joints)))
+    if together >= 2 and all(flags[k] for k in held):
+        shift = np.mean([out[k][1] for k in held], axis=0)
+        base = np.asarray(joints[0]).dtype
+        for k in held:
+            out[k] = ((np.asarray(joints[k], dtype=np.float64) + shift[:, None, :]).astype(base),
+                      shift)  # fmt: skip
+    return np.stack([p for p, _ in out])

@@ -27,7 +27,8 @@ def clean_up(
     labels (N, T, 4) before anything is written, in this order:
 
     1. ``anchor`` (only with ``fit``): people with ``clean`` moved back by the slide of a
-       planted foot (:mod:`umf.anchoring`), with ``contact`` all together by their mean;
+       planted foot (:mod:`umf.anchoring`), with ``contact`` people 1 and 2 together by
+       their mean;
     2. ``separate``: people 2..N shifted rigidly apart on the floor (:mod:`umf.separation`),
        judged on the anchored paths; with ``contact`` (``{"closest_m", "pelvis_m"}``: the
        prompt is worded like a real take whose people touch, from the model's vocabulary)
@@ -54,7 +55,7 @@ def place_people(
     """Steps 1 and 2 of :func:`clean_up` for one scene: the joints (N, T, 22, 3) anchored
     (with ``anchor``) and the (N, 3) separation shifts, not yet added to them."""
     start = (
-        anchor_people(decoded, contacts, floor, clean, together=bool(contact))
+        anchor_people(decoded, contacts, floor, clean, together=2 if contact else 0)
         if anchor
         else decoded
     )

@@ -262,7 +262,8 @@ class SFlowConfig:
     # > 0: a prompt worded like a real take whose people touch (a salsa couple: the
     # vocabulary's contact) has people 1 and 2 sampled again from this time on the paths
     # towards both people of one crop of those takes (the bank's takes; umf.take_start):
-    # the flows' own leader and partner each dance, but their hands do not meet
+    # the flows' own leader and partner each dance, but their hands do not meet. In the
+    # P-Flow it is local time on the finest stage (global 0.85 for 0.7 in two stages)
     warm_take: float = 0.0
     # the context C also enters the transformer beside the state, clean at every t (not in
     # the paper): the state shows C only blurred by noise early on, so a noisier reaction

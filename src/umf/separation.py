@@ -186,8 +186,10 @@ def touching_distances(contact: dict | None) -> dict[str, float | bool]:
     """:func:`separate_people`'s distances: its defaults, or for a prompt worded like a
     touching take (``contact``: :mod:`umf.coverage`), the least real partners keep at any
     frame, :data:`TOUCH_FLOOR` between joints and :data:`TOUCH_PELVIS` between pelvises:
-    partners may hold hands and dance as close as the takes do, but bodies must not pass
-    through each other."""
+    partners may hold hands and dance as close as the takes do, but one torso does not stand
+    inside the other. Joints only, on the decoded motion: limbs may still cross, and the fit
+    that follows may bring two joints a little closer (no :data:`FIT_MARGIN` here, or real
+    takes would be pushed apart)."""
     if not contact:
         return {}
     return {"min_distance": TOUCH_PELVIS, "contact_distance": TOUCH_FLOOR, "smallest": True}
