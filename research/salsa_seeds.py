@@ -8,7 +8,11 @@ pelvises apart in statures; facing: the median cosine; the body capsules' overla
 their medians and the seeds passing every target. ``teach_report.py`` measures the real
 takes beside them. ``--warm-take``: the same seeds again for each value of
 ``sflow.warm_take`` (a sweep; the medians only), ``--first``: the first seed (the bundled
-model's 0.7 was chosen on seeds 8-23, results/umf-small-bandai-20261213).
+model's 0.7 was chosen on seeds 8-23, results/umf-small-bandai-20261213). ``--nearest
+CORPUS``: how far each couple is from the training takes, its mean per-joint distance to
+the nearest crop of the model's bank (both people as the pipeline decodes them, in person
+1's frame), beside the real test and val takes' first 4 s against the same crops: a couple
+finished from a crop stays near it, a new real couple does not.
 """
 
 from __future__ import annotations
@@ -37,6 +41,32 @@ def salsa_couples(model: Path | None, seeds: int, first: int = 0, warm_take: flo
         yield s, np.asarray(scene.joints, dtype=np.float64)
 
 
+def take_crops(model: Path | None, frames: int = 120) -> np.ndarray:
+    """The bank's touching-take crops of ``frames`` decoded as the pipeline decodes a scene:
+    joints (N, 2, T + 1, 22, 3) in person 1's frame."""
+    import torch
+
+    from umf.pipeline import UMFPipeline
+    from umf.representation import features_to_joints
+
+    pipe = UMFPipeline.from_pretrained(model)
+    z = pipe.reactions.takes[frames]
+    with torch.no_grad():
+        raw = pipe._decode_raw(z.flatten(0, 1).to(pipe.device), frames).reshape(
+            len(z), 2, frames, -1
+        )
+        feats = torch.cat([pipe._fuse(raw[:, :1]), pipe._fuse(raw[:, 1:], reaction=True)], dim=1)
+    return features_to_joints(feats.cpu()).numpy()
+
+
+def nearest_crop(joints: np.ndarray, crops: np.ndarray) -> float:
+    """Mean per-joint distance (m) of a couple (2, T, 22, 3) to the nearest of ``crops``."""
+    t = min(joints.shape[1], crops.shape[2])
+    return float(
+        np.linalg.norm(crops[:, :, :t] - joints[None, :, :t], axis=-1).mean((1, 2, 3)).min()
+    )
+
+
 MEDIANS = ("hands_near", "pelvis", "facing", "penetration_cm", "penetration_frac")
 
 
@@ -46,7 +76,26 @@ def main() -> None:
     ap.add_argument("--seeds", type=int, default=8)
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--warm-take", type=float, nargs="+", default=None)
+    ap.add_argument("--nearest", type=Path, default=None, metavar="CORPUS")
     args = ap.parse_args()
+
+    if args.nearest is not None:
+        from umf.data.corpus import Corpus
+        from umf.representation import canonicalize_scene
+
+        crops = take_crops(args.model)
+        near = [
+            nearest_crop(j, crops) for _, j in salsa_couples(args.model, args.seeds, args.first)
+        ]
+        print("generated, seed by seed:", " ".join(f"{d:.3f}" for d in near),
+              f"m; median {np.median(near):.3f}")  # fmt: skip
+        import torch
+
+        for c in Corpus.load(args.nearest).clips:
+            if c.meta.get("content") == "salsa" and c.split in ("test", "val"):
+                canon, _ = canonicalize_scene(torch.from_numpy(c.joints[:2, :121]).float())
+                print(f"real {c.split} {c.id}: {nearest_crop(canon.numpy(), crops):.3f} m")
+        return
 
     for take in args.warm_take or [None]:
         rows = []
