@@ -54,11 +54,8 @@ def place_people(
 ) -> tuple[np.ndarray, np.ndarray]:
     """Steps 1 and 2 of :func:`clean_up` for one scene: the joints (N, T, 22, 3) anchored
     (with ``anchor``) and the (N, 3) separation shifts, not yet added to them."""
-    start = (
-        anchor_people(decoded, contacts, floor, clean, together=2 if contact else 0)
-        if anchor
-        else decoded
-    )
+    held = 2 if contact else 0  # the couple a prompt holds together moves as one
+    start = anchor_people(decoded, contacts, floor, clean, together=held) if anchor else decoded
     shifts = np.zeros((decoded.shape[0], 3), dtype=np.float32)
     if separate and decoded.shape[0] > 1:
         _, shifts = separate_people(start, **touching_distances(contact))
