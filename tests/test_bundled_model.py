@@ -370,3 +370,20 @@ def test_a_salsa_couple_takes_hands_without_passing_through_each_other(pipe):
     hands = [pair_closeness(s.joints)["hands_near"] for s in plain]
     assert np.median(hands) < np.median([c["hands_near"] for c in close])
     assert np.array_equal(walk.joints, same.joints)
+
+
+def test_umf_info_names_the_touching_takes_and_a_prompt_worded_like_one():
+    """`umf info` lists the captions of the real takes whose people touch and says a couple
+    worded like one is finished from one of them; `--prompt` says which prompts are."""
+    from typer.testing import CliRunner
+
+    from umf.cli.main import app
+
+    out = CliRunner().invoke(app, ["info"])
+    assert out.exit_code == 0, out.output
+    line = next(x for x in out.stdout.splitlines() if x.startswith("people who touch"))
+    assert "salsa" in line and "warm_take 0.7" in line
+    out = CliRunner().invoke(app, ["info", "--prompt", "Two people dance salsa together.",
+                                   "--prompt", "Two people walk side by side."])  # fmt: skip
+    salsa, walk = [x for x in out.stdout.splitlines() if x.startswith("'Two people")]
+    assert "people touch" in salsa and "people touch" not in walk

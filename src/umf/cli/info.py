@@ -47,6 +47,15 @@ def info(
     typer.echo(f"multi-person relations ({len(vocab.relations)}): {', '.join(vocab.relations)}")
     typer.echo(f"trained captions: {len(vocab.phrases)}; a prompt is known when its coverage "
                f"(cosine to the nearest one) is at least {vocab.threshold:.3f}")  # fmt: skip
+    touching = sorted(vocab.contact)
+    if touching:
+        take = config.sflow.warm_take if config is not None else 0.0
+        how = "the clean-up lets such a couple touch"
+        if take:
+            how = f"a couple worded like one is finished from one of them, warm_take {take:g}"
+        more = " ..." if len(touching) > 3 else ""
+        typer.echo(f"people who touch ({len(touching)} captions of real takes; {how}): "
+                   + "; ".join(touching[:3]) + more)  # fmt: skip
     if phrases:
         for p in vocab.phrases:
             typer.echo(f"  {p}")
@@ -56,7 +65,8 @@ def info(
         pipe = UMFPipeline.from_pretrained(model)
         for p, cov in zip(prompt, pipe.coverage(list(prompt)), strict=True):
             verdict = "known" if cov["known"] else "NOT known"
+            touch = "; worded like a real take whose people touch" if "contact" in cov else ""
             typer.echo(
-                f"{p!r}: {verdict} (coverage {cov['score']:.3f}); nearest: "
+                f"{p!r}: {verdict} (coverage {cov['score']:.3f}{touch}); nearest: "
                 + "; ".join(cov["nearest"])
             )
