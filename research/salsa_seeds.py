@@ -12,7 +12,8 @@ model's 0.7 was chosen on seeds 8-23, results/umf-small-bandai-20261213). ``--ne
 CORPUS``: how far each couple is from the training takes, its mean per-joint distance to
 the nearest crop of the model's bank (both people as the pipeline decodes them, in person
 1's frame), beside the real test and val takes' first 4 s against the same crops: a couple
-finished from a crop stays near it, a new real couple does not.
+finished from a crop stays near it, a new real couple does not. ``--json FILE``: every
+seed's statistics, for ``research/salsa_figure.py``.
 """
 
 from __future__ import annotations
@@ -77,6 +78,8 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--warm-take", type=float, nargs="+", default=None)
     ap.add_argument("--nearest", type=Path, default=None, metavar="CORPUS")
+    ap.add_argument("--json", type=Path, default=None, help="every seed's statistics, per "
+                    "warm_take (research/salsa_figure.py draws them)")  # fmt: skip
     args = ap.parse_args()
 
     if args.nearest is not None:
@@ -97,11 +100,13 @@ def main() -> None:
                 print(f"real {c.split} {c.id}: {nearest_crop(canon.numpy(), crops):.3f} m")
         return
 
+    every = []
     for take in args.warm_take or [None]:
         rows = []
         for s, joints in salsa_couples(args.model, args.seeds, args.first, take):
             c = closeness(joints)
             rows.append(c)
+            every.append({"warm_take": take, "seed": s, **c, "pass": salsa_pass(c)})
             if args.warm_take is None:
                 print(s, {k: round(v, 3) if isinstance(v, float) else v for k, v in c.items()},
                       salsa_pass(c))  # fmt: skip
@@ -109,6 +114,10 @@ def main() -> None:
             print(f"warm_take {take}:", end=" ")
         print(", ".join(f"{k} median {np.median([r[k] for r in rows]):.3f}" for k in MEDIANS)
               + f"; passing {sum(salsa_pass(r) for r in rows)} / {args.seeds}")  # fmt: skip
+    if args.json is not None:
+        import json
+
+        args.json.write_text(json.dumps(every, indent=1) + "\n")
 
 
 if __name__ == "__main__":
