@@ -3,6 +3,8 @@ P-Flow's finest-stage warm start, the bank's takes, their build and the pipeline
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 import pytest
 import torch
@@ -97,9 +99,12 @@ def _takes_bank(pipe, seed: int = 0) -> ReactionBank:
     nan = torch.full_like(texts[0], torch.nan)
     take_texts = torch.stack([torch.stack([texts[0], texts[1]])] * 3
                              + [torch.stack([texts[2], nan])] * 2)  # fmt: skip
+    names = ["cmu-handshake/handshake-01", "cmu-salsa/salsa-01"]
+    cut = torch.tensor([[1, 0], [1, 30], [1, 60], [0, 0], [0, 15]])  # (take row, first frame)
     return ReactionBank({30: torch.randn(10, *shape, generator=g)},
                         takes={30: torch.randn(5, 2, *shape, generator=g)},
-                        take_texts={30: take_texts})  # fmt: skip
+                        take_texts={30: take_texts}, take_sources={30: cut},
+                        take_names=names)  # fmt: skip
 
 
 def test_takes_round_trip_and_a_prompt_draws_a_crop_of_its_nearest_take(tiny, tmp_path):
@@ -124,6 +129,15 @@ def test_takes_round_trip_and_a_prompt_draws_a_crop_of_its_nearest_take(tiny, tm
         assert int(alone[1][0]) == int(idx[0])  # a row's draw does not depend on its batch
     assert seen == {0, 1, 2}  # any crop of the take, not always the same
     assert ReactionBank({30: bank.latents[30]}).pick_take(30, prompts) is None
+    assert back.take_names == bank.take_names
+    assert back.take_source(30, torch.tensor([2, 4])) == [
+        {"take": "cmu-salsa/salsa-01", "start_frame": 60, "frames": 30},
+        {"take": "cmu-handshake/handshake-01", "start_frame": 15, "frames": 30},
+    ]
+    older = ReactionBank({30: bank.latents[30]}, takes=bank.takes, take_texts=bank.take_texts)
+    (tmp_path / "older").mkdir()
+    older.save(tmp_path / "older")  # a bank written before the sources
+    assert ReactionBank.load(tmp_path / "older").take_source(30, torch.tensor([0])) == [None]
 
 
 def test_a_take_caption_row_past_the_table_is_refused(tiny, tmp_path):
@@ -137,6 +151,14 @@ def test_a_take_caption_row_past_the_table_is_refused(tiny, tmp_path):
     with pytest.raises(UMFError, match="corrupt reaction bank"):
         ReactionBank.load(tmp_path)
     raw["take_caption_30"][0, 0] = 0
+    raw["take_source_30"][0, 0] = 2  # only two take names
+    save_file(raw, str(path), metadata={"take_names": '["a", "b"]'})
+    with pytest.raises(UMFError, match="sources of the takes"):
+        ReactionBank.load(tmp_path)
+    raw["take_source_30"][0, 0] = 0
+    save_file(raw, str(path), metadata={"take_names": '"not a list"'})
+    with pytest.raises(UMFError, match="corrupt reaction bank"):
+        ReactionBank.load(tmp_path)
     raw["takes_30"] = raw["takes_30"][:, :1].contiguous()
     save_file(raw, str(path))
     with pytest.raises(UMFError, match="takes of 30 frames do not fit"):
@@ -167,21 +189,21 @@ def test_touching_takes_are_cropped_whole_every_second(real_joints):
         def __init__(self) -> None:
             self.items = [close, close, apart, ("scene", {}, None)]
 
-    crops, captions = touching_crops(Served(), 30)
+    crops, captions, cut = touching_crops(Served(), 30)
     starts = list(range(0, 99 - 30 + 1, TAKE_STEP))
-    assert (
-        len(crops) == len(starts) == 3 and captions == [["a couple", "two people hold hands"]] * 3
-    )
+    assert len(crops) == len(starts) == 3
+    assert captions == [["a couple", "two people hold hands"]] * 3
+    assert cut == [("hold hands", s) for s in starts]
     for crop, s in zip(crops, starts, strict=True):
         want = canonicalize_features(
             torch.as_tensor(_clip_crop(close[1], close[2], range(2), s, 30))
         )
         torch.testing.assert_close(crop, want.float())
         assert crop.shape == (2, 30, 262)
-    assert touching_crops(Served(), 120) == ([], [])
+    assert touching_crops(Served(), 120) == ([], [], [])
 
 
-def test_the_pipeline_starts_only_couples_worded_like_a_take_from_one(tiny, monkeypatch):
+def test_the_pipeline_starts_only_couples_worded_like_a_take_from_one(tiny, monkeypatch, tmp_path):
     """A prompt the vocabulary reads as a touching take's (its coverage's contact) has
     people 1 and 2 sampled again from one of the take's crops; near the end of the path
     they are that crop. Other prompts, and scenes sharing a batch with it, are untouched."""
@@ -216,6 +238,14 @@ def test_the_pipeline_starts_only_couples_worded_like_a_take_from_one(tiny, monk
     assert couple.meta["nfe"] > plain[0].meta["nfe"]
     again = pipe(salsa, num_people=2, seconds=1.0, seed=3, fit=False, separate=False)[0]
     assert np.array_equal(couple.joints, again.joints)
+    take = couple.meta["take"]  # where the couple came from, in the scene and its NPZ
+    assert take == {"take": "cmu-salsa/salsa-01", "start_frame": 30 * crop, "frames": 30,
+                    "warm_take": 0.999}  # fmt: skip
+    assert "take" not in both[1].meta
+    path = tmp_path / "couple.npz"
+    couple.save_npz(path)
+    with np.load(path) as z:
+        assert json.loads(str(z["take"])) == take
 
 
 @pytest.mark.parametrize("value", ["1.0", "-0.1", "1.5"])

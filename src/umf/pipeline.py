@@ -394,9 +394,13 @@ class UMFPipeline:
         check_finite(joints, "the generated joints")
         meta = {"nfe": nfe, "guidance": guidance, "num_people": num_people, "floor": floor}
         scenes = []
+        took = {} if couples is None else dict(zip(couples.rows.tolist(), couples.sources,
+                                                   strict=True))  # fmt: skip
         for i in range(b):
             raw, f, bodies = joints[i], feats[i].numpy(), fitted[i]
             extra = {"shifts": shifts[i].tolist(), "sample_index": indices[i]}
+            if took.get(i) is not None:  # people 1 and 2 finished from this real take's crop
+                extra["take"] = {**took[i], "warm_take": self.config.sflow.warm_take}
             scenes.append(Scene(raw if bodies is None else bodies.joints(), f, prompts[i],
                                 self.config.fps, seed, self.name, {**meta, **extra}, raw,
                                 bodies, fit=False))  # fmt: skip

@@ -24,9 +24,11 @@ them. They are derived from the training data and carry its licence.
 
 from __future__ import annotations
 
+import json
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import torch
 
@@ -48,6 +50,8 @@ LAG = "lag_"
 START = "start_"
 TAKE = "takes_"  # both people of a crop of a touching real take (N, 2, p, r) ...
 TAKE_CAPTION = "take_caption_"  # ... and its take's caption rows (N, C), -1: none
+TAKE_SOURCE = "take_source_"  # ... and where it was cut: (N, 2) its take's row of the file's
+TAKE_NAMES = "take_names"  # metadata, a JSON list of the takes' clip ids, and its first frame
 # how much nearer a caption may be to a prompt's mirror image than to the prompt and still be
 # on its side: equal within float error (captions naming no side are as near both)
 SAME_SIDE = 1e-5
@@ -95,6 +99,10 @@ class ReactionBank:
     # embeddings (N, C, D), NaN rows where a take has fewer than C; may be empty
     takes: dict[int, Tensor] = field(default_factory=dict)
     take_texts: dict[int, Tensor] = field(default_factory=dict)
+    # where each crop was cut, (N, 2) ints: its take's row of ``take_names`` (the clip ids)
+    # and its first feature frame in the take; may be empty (a bank written before them)
+    take_sources: dict[int, Tensor] = field(default_factory=dict)
+    take_names: list[str] = field(default_factory=list)
 
     def lengths(self) -> list[int]:
         return sorted(self.latents)
@@ -111,6 +119,8 @@ class ReactionBank:
         tensors |= {f"{START}{k}": v for k, v in self.starts.items()}
         tensors = {k: v.to(torch.float16) for k, v in tensors.items()}
         tensors |= {f"{TAKE}{k}": v.to(torch.float16) for k, v in self.takes.items()}
+        tensors |= {f"{TAKE_SOURCE}{k}": v.to(torch.int32) for k, v in self.take_sources.items()}
+        metadata = {TAKE_NAMES: json.dumps(self.take_names)} if self.take_names else None
         if self.texts or self.take_texts:  # one table for the reactions' and takes' captions
             parts = [(CAPTION, k, self.texts[k], None) for k in sorted(self.texts)]
             for k in sorted(self.take_texts):
@@ -125,14 +135,14 @@ class ReactionBank:
                 if have is not None:  # a take's captions: its rows, -1 past the last
                     part = torch.full(have.shape, -1, dtype=part.dtype).masked_scatter(have, part)
                 tensors[f"{name}{k}"] = part.to(torch.int32)
-        save_tensors_atomic({k: v.contiguous() for k, v in tensors.items()}, path)
+        save_tensors_atomic({k: v.contiguous() for k, v in tensors.items()}, path, metadata)
         path.chmod(0o644)
         return path
 
     @classmethod
     def load(cls, model_dir: str | Path, shape: Sequence[int] | None = None) -> ReactionBank | None:
         """The model's reactions, or None when it has none; ``shape`` (p, r) checks them."""
-        from safetensors import SafetensorError
+        from safetensors import SafetensorError, safe_open
         from safetensors.torch import load_file
 
         path = Path(model_dir) / REACTIONS
@@ -140,6 +150,12 @@ class ReactionBank:
             return None
         try:
             raw = load_file(str(path))
+            with safe_open(str(path), "pt") as f:
+                names = json.loads((f.metadata() or {}).get(TAKE_NAMES, "[]"))
+            if not isinstance(names, list) or not all(isinstance(n, str) for n in names):
+                raise ValueError("take names are not a list of strings")
+            sources = {int(k.removeprefix(TAKE_SOURCE)): v for k, v in raw.items()
+                       if k.startswith(TAKE_SOURCE)}  # fmt: skip
             latents, texts = _per_length(raw, PREFIX), _per_length(raw, TEXT)
             table = raw.get(CAPTIONS)
             for k, rows in raw.items():
@@ -186,9 +202,26 @@ class ReactionBank:
             )
             if not fits or not torch.isfinite(z).all() or e is None or len(e) != len(z):
                 raise UMFError(f"{path}: takes of {frames} frames do not fit the model")
+            where = sources.get(frames)
+            if where is not None and (where.shape != (len(z), 2) or where.is_floating_point()
+                                      or bool((where[:, 0] < 0).any())
+                                      or bool((where[:, 0] >= len(names)).any())):  # fmt: skip
+                raise UMFError(f"{path}: the sources of the takes of {frames} frames are corrupt")
         if not latents:
             raise UMFError(f"{path}: an empty reaction bank")
-        return cls(latents, texts, velocities, lags, starts, takes, take_texts)
+        return cls(latents, texts, velocities, lags, starts, takes, take_texts,
+                   {k: v.long() for k, v in sources.items() if k in takes}, names)  # fmt: skip
+
+    def take_source(self, length: int, idx: Tensor) -> list[dict[str, Any] | None]:
+        """Where the crops ``idx`` (R,) of ``length`` were cut: per crop ``{"take": clip id,
+        "start_frame": its first feature frame in the take, "frames": length}``; None for a
+        bank written before the sources."""
+        where = self.take_sources.get(length)
+        if where is None:
+            return [None] * len(idx)
+        rows = where[idx.cpu().long()].tolist()
+        return [{"take": self.take_names[r], "start_frame": int(f), "frames": int(length)}
+                for r, f in rows]  # fmt: skip
 
     def pick_take(self, frames: int, prompt: Tensor,
                   generator: Generators = None) -> tuple[int, Tensor, Tensor] | None:  # fmt: skip

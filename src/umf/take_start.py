@@ -24,21 +24,30 @@ prompts per person keeps the flows' own pass.
 from __future__ import annotations
 
 from collections.abc import Sequence
-from typing import Any
+from typing import Any, NamedTuple
 
 import torch
 
 Tensor = torch.Tensor
 
 
+class Couples(NamedTuple):
+    """The rows of a batch started from a take, both people's latents of each row's crop
+    (R, 2, p, r) on the VAE's scale, and where each crop was cut
+    (:meth:`umf.reaction_bank.ReactionBank.take_source`; None for an older bank)."""
+
+    rows: Tensor
+    pair: Tensor
+    sources: list[dict[str, Any] | None]
+
+
 def couple_rows(
     pipe: Any, text: Any, contact: Sequence[dict | None], frames: int, generator: Any
-) -> tuple[Tensor, Tensor] | None:
+) -> Couples | None:
     """The rows of a batch whose prompt is worded like a touching take, and for each a crop
-    of those takes: both people's latents (R, 2, p, r) on the VAE's scale, drawn with the
-    row's generator (a list, one per row). A row whose take is too short for ``frames``
-    has none. None where no row has one, the model sets no ``sflow.warm_take`` or its bank
-    holds no takes."""
+    of those takes (:class:`Couples`), drawn with the row's generator (a list, one per
+    row). A row whose take is too short for ``frames`` has none. None where no row has
+    one, the model sets no ``sflow.warm_take`` or its bank holds no takes."""
     bank = pipe.reactions
     if not pipe.config.sflow.warm_take or bank is None or not bank.takes:
         return None
@@ -50,13 +59,16 @@ def couple_rows(
     own = own.cpu()
     if not bool(own.any()):
         return None
-    return rows[own], bank.takes[length][idx.cpu()[own]].to(pipe.device)
+    idx = idx.cpu()[own]
+    return Couples(
+        rows[own], bank.takes[length][idx].to(pipe.device), bank.take_source(length, idx)
+    )
 
 
 def start_couples(
     pipe: Any, z1: Tensor, text: Any, uncond: Any, generator: Any,
     contact: Sequence[dict | None] | None, frames: int, pflow: dict[str, Any],
-) -> tuple[Tensor, tuple[Tensor, Tensor] | None, int]:  # fmt: skip
+) -> tuple[Tensor, Couples | None, int]:  # fmt: skip
     """Person 1's latents (B, p, r) with the rows worded like a touching take started from
     one of its crops (:func:`couple_rows`, :func:`start_leaders`), those rows and crops (for
     :func:`start_partners`; None: no row) and the NFE. ``contact``: per row, the prompt's
@@ -69,13 +81,13 @@ def start_couples(
 
 
 def start_leaders(
-    pipe: Any, z1: Tensor, couples: tuple[Tensor, Tensor], text: Any, uncond: Any,
+    pipe: Any, z1: Tensor, couples: Couples, text: Any, uncond: Any,
     generator: Any, **pflow: Any,
 ) -> tuple[Tensor, int]:  # fmt: skip
     """Person 1's latents (B, p, r) with the couples' rows sampled again by the P-Flow from
     ``sflow.warm_take`` towards their take's person 1, and the NFE. ``pflow``: the
     pipeline's P-Flow arguments (dataset token, steps, guidance)."""
-    rows, pair = couples
+    rows, pair, _ = couples
     again, nfe = pipe.pflow.sample(
         text.rows(rows), _rows(uncond, rows), generator=[generator[i] for i in rows.tolist()],
         warm=pair[:, 0], warm_t=pipe.config.sflow.warm_take,
@@ -87,13 +99,13 @@ def start_leaders(
 
 
 def start_partners(
-    pipe: Any, w: Tensor, couples: tuple[Tensor, Tensor], prev: Tensor, mask: Tensor,
+    pipe: Any, w: Tensor, couples: Couples, prev: Tensor, mask: Tensor,
     text: Any, uncond: Any, generator: Any, *, steps: int, guidance: float | None,
 ) -> tuple[Tensor, int]:  # fmt: skip
     """Person 2's latents (B, p, r) with the couples' rows sampled again by the S-Flow from
     ``sflow.warm_take`` towards their take's person 2, beside person 1 (``prev`` (B, 1, p,
     r)), and the NFE."""
-    rows, pair = couples
+    rows, pair, _ = couples
     again, nfe = pipe.sflow.sample(
         prev[rows], mask[rows], text.rows(rows), _rows(uncond, rows), steps=steps,
         guidance=guidance, generator=[generator[i] for i in rows.tolist()], warm=pair[:, 1],

@@ -47,6 +47,8 @@ def scene_arrays(scene: Any) -> dict[str, np.ndarray]:
     for key in ("person_prompts", "person_coverage"):
         if isinstance(scene.meta.get(key), list):
             arrays[key] = np.array(json.dumps(scene.meta[key]))
+    if isinstance(scene.meta.get("take"), dict):  # the real take a couple was finished from
+        arrays["take"] = np.array(json.dumps(scene.meta["take"]))
     return arrays
 
 

@@ -204,6 +204,8 @@ class SceneStore:
             params = {**params, "coverage": scene.meta["coverage"]}
         if isinstance(scene.meta.get("person_coverage"), list):
             params = {**params, "person_coverage": scene.meta["person_coverage"]}
+        if isinstance(scene.meta.get("take"), dict):  # a couple finished from a real take
+            params = {**params, "take": scene.meta["take"]}
         record = self.new_record(scene.text, scene.joints, float(scene.fps), scene.num_people,
                                  scene.num_frames, params)  # fmt: skip
         record.session = session

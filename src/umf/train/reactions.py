@@ -67,6 +67,7 @@ def build_reaction_bank(
     starts: dict[int, torch.Tensor] = {}
     takes: dict[int, torch.Tensor] = {}
     take_texts: dict[int, torch.Tensor] = {}
+    cuts: dict[int, list[tuple[str, int]]] = {}  # per length, where each take crop was cut
     whole_lags: dict[str, list[int]] = {}  # per scene or take, its people's delays
     for frames in tqdm(lengths, desc="reactions", unit="length", disable=not progress):
         ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=frames,
@@ -98,7 +99,7 @@ def build_reaction_bank(
         starts[frames] = floor_start(real)
         latents[frames] = torch.cat([pipe.vae.encode(x[j : j + 256], mask[j : j + 256])[0].cpu()
                                      for j in range(0, len(x), 256)])  # fmt: skip
-        crops, take_captions = touching_crops(ds, frames)
+        crops, take_captions, cuts[frames] = touching_crops(ds, frames)
         if crops:
             x = pipe.normalizer.normalize(torch.stack(crops)).to(pipe.device)  # (N, 2, T, F)
             whole = torch.ones(x.shape[0] * 2, frames, dtype=torch.bool, device=x.device)
@@ -114,15 +115,21 @@ def build_reaction_bank(
             take_texts[frames] = e
     if not latents:
         raise NoReactions(f"{corpus_dir}: no multi-person train scene to take reactions from")
-    return ReactionBank(latents, texts, velocities, lags, starts, takes, take_texts)
+    names = sorted({c for cut in cuts.values() for c, _ in cut})
+    sources = {k: torch.tensor([[names.index(c), f] for c, f in cuts[k]]) for k in takes}
+    return ReactionBank(latents, texts, velocities, lags, starts, takes, take_texts, sources,
+                        names)  # fmt: skip
 
 
-def touching_crops(ds: SceneDataset, frames: int) -> tuple[list[torch.Tensor], list[list[str]]]:
+def touching_crops(
+    ds: SceneDataset, frames: int
+) -> tuple[list[torch.Tensor], list[list[str]], list[tuple[str, int]]]:
     """People 1 and 2 of each real take the dataset serves whose people touch (hands near in
     at least a quarter of the frames, :func:`umf.data.relations.measured_relation`), cropped
     to ``frames`` every :data:`TAKE_STEP` frames in person 1's frame, neither mirrored nor
-    carried on: features (2, frames, 262) de-normalised, and each crop's take's captions."""
-    crops, captions, seen = [], [], set()
+    carried on: features (2, frames, 262) de-normalised, each crop's take's captions, and
+    where it was cut (the take's clip id, its first frame)."""
+    crops, captions, cut, seen = [], [], [], set()
     for kind, clip, tf in ds.items:
         if kind != "clip" or clip.id in seen or clip.num_frames - 1 < frames:
             continue
@@ -133,7 +140,8 @@ def touching_crops(ds: SceneDataset, frames: int) -> tuple[list[torch.Tensor], l
             whole = _clip_crop(clip, tf, range(2), start, frames)
             crops.append(canonicalize_features(torch.as_tensor(whole)).float())
             captions.append(sorted(set(clip.captions)))
-    return crops, captions
+            cut.append((clip.id, start))
+    return crops, captions, cut
 
 
 def answer_waits(ds: SceneDataset, index: int) -> list[int]:
