@@ -354,6 +354,7 @@ def test_a_salsa_couple_takes_hands_without_passing_through_each_other(pipe):
     scenes = pipe([salsa] * 4, num_people=2, seconds=4.0, seed=0, sample_indices=range(4))
     close = [pair_closeness(s.joints) for s in scenes]
     assert scenes[0].meta["coverage"]["contact"]
+    assert all(s.meta["take"]["take"].startswith("cmu-salsa/") for s in scenes)  # provenance
     assert np.median([c["hands_near"] for c in close]) >= 0.4
     assert np.median([c["facing"] for c in close]) > 0.5
     for s in scenes:
