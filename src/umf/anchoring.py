@@ -91,8 +91,9 @@ def anchor_people(
     salsa couple, hand in hand) and move as one, each by the mean of their corrections, so
     where they stand to each other is the decoder's; everyone else, and a couple beside a
     user's own motion, is anchored one by one. Anchored one by one, a generated couple that
-    held hands in 58 % of its frames (median of seeds 8-23) did in 48 %
-    (results/umf-small-bandai-20261213)."""
+    held hands in 58 % of its frames (median of seeds 8-23, warm_take 0.8) did in 48 %
+    (results/umf-small-bandai-20261213; a throw-away measurement during the change: the
+    pipeline no longer anchors a couple one by one)."""
     flags = [clean] * len(joints) if isinstance(clean, bool) else list(clean)
     out = [anchor_feet(p, c, floor) if use else (np.asarray(p), None)
            for p, c, use in zip(joints, contacts, flags, strict=True)]  # fmt: skip

@@ -25,7 +25,7 @@ them. They are derived from the training data and carry its licence.
 from __future__ import annotations
 
 import json
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
@@ -74,6 +74,23 @@ def _narrowed(keep: Tensor, allowed: Tensor | None) -> Tensor:
     rest = torch.ones_like(keep) if allowed is None else allowed
     keep = keep & rest
     return torch.where(keep.any(dim=1, keepdim=True), keep, rest)
+
+
+def _embedded(table: Tensor | None, rows: Tensor, name: str, padded: bool) -> Tensor:
+    """The caption embeddings that rows of the file's caption ``table`` (U, D) stand for:
+    ``rows`` (N,) for reactions, or (N, C) padded with -1 for takes (``padded``; NaN rows
+    there). Raises ValueError where they index no table."""
+    integer = rows.dtype in (torch.int32, torch.int64) and rows.ndim == (2 if padded else 1)
+    low = -1 if padded else 0
+    if table is None or table.ndim != 2 or not integer or bool((rows < low).any()) or (
+            len(rows) and rows.max() >= len(table)):  # fmt: skip
+        raise ValueError(f"{name} indexes no caption table")
+    return table[rows.clamp_min(0).long()].float().masked_fill((rows < 0)[..., None], torch.nan)
+
+
+def nearest_length(lengths: Iterable[int], frames: int) -> int:
+    """The one of ``lengths`` nearest to ``frames`` (the shorter on a tie)."""
+    return min(lengths, key=lambda k: (abs(k - frames), k))
 
 
 @dataclass
@@ -160,24 +177,11 @@ class ReactionBank:
             table = raw.get(CAPTIONS)
             for k, rows in raw.items():
                 if k.startswith(CAPTION) and k != CAPTIONS:
-                    integer = rows.dtype in (torch.int32, torch.int64) and rows.ndim == 1
-                    fits = table is not None and table.ndim == 2 and integer
-                    if not fits or (rows < 0).any() or (len(rows) and rows.max() >= len(table)):
-                        raise ValueError(f"{k} indexes no caption table")
-                    texts[int(k.removeprefix(CAPTION))] = table[rows.long()].float()
+                    texts[int(k.removeprefix(CAPTION))] = _embedded(table, rows, k, padded=False)
             velocities, lags = _per_length(raw, VELOCITY), _per_length(raw, LAG)
             starts, takes = _per_length(raw, START), _per_length(raw, TAKE)
-            take_texts = {}
-            for k, rows in raw.items():
-                if k.startswith(TAKE_CAPTION):
-                    integer = rows.dtype in (torch.int32, torch.int64) and rows.ndim == 2
-                    if table is None or not integer or (rows < -1).any() or (
-                            len(rows) and rows.max() >= len(table)):  # fmt: skip
-                        raise ValueError(f"{k} indexes no caption table")
-                    e = table[rows.clamp_min(0).long()].float()
-                    take_texts[int(k.removeprefix(TAKE_CAPTION))] = e.masked_fill(
-                        (rows < 0)[..., None], torch.nan
-                    )
+            take_texts = {int(k.removeprefix(TAKE_CAPTION)): _embedded(table, rows, k, padded=True)
+                          for k, rows in raw.items() if k.startswith(TAKE_CAPTION)}  # fmt: skip
         except (OSError, ValueError, RuntimeError, IndexError, SafetensorError) as exc:
             raise UMFError(f"{path}: corrupt reaction bank ({type(exc).__name__})") from None
         for frames, z in latents.items():
@@ -239,7 +243,7 @@ class ReactionBank:
             e = e.to(prompt.device)  # (N, C, D)
             sims = torch.einsum("bd,ncd->bnc", prompt.float(), e.nan_to_num(0.0))
             best[k] = sims.masked_fill(e.isnan().any(-1)[None], -torch.inf).amax(-1)  # (B, N)
-        length = min(self.takes, key=lambda k: (abs(k - frames), k))
+        length = nearest_length(self.takes, frames)
         sims = best[length]
         top = sims.amax(dim=1)
         anywhere = torch.stack([s.amax(dim=1) for s in best.values()], dim=1).amax(dim=1)
@@ -250,7 +254,7 @@ class ReactionBank:
 
     def bucket(self, frames: int) -> int:
         """The stored length nearest to ``frames`` (the shorter on a tie)."""
-        return min(self.latents, key=lambda k: (abs(k - frames), k))
+        return nearest_length(self.latents, frames)
 
     def _gap(self, length: int, velocity: Tensor) -> Tensor:
         """(B, N) distances between each row's velocity (B, 2) and the stored ones."""
@@ -326,8 +330,8 @@ class ReactionBank:
         best = torch.stack([(prompt.float() @ self.texts[k].to(prompt.device).T).amax(dim=1)
                             for k in lengths], dim=1)  # fmt: skip  # (B, L)
         near = best >= best.amax(dim=1, keepdim=True) - SAME_SIDE
-        return [min((k for k, ok in zip(lengths, row, strict=True) if ok),
-                    key=lambda k: (abs(k - frames), k)) for row in near.tolist()]  # fmt: skip
+        return [nearest_length([k for k, ok in zip(lengths, row, strict=True) if ok], frames)
+                for row in near.tolist()]  # fmt: skip
 
     def pick(
         self,
