@@ -12,9 +12,11 @@ validation clips, which no model trained on; ``--split test`` scores the corpus'
 ``test_groups``. Scenes are generated as the protocol does (``umf.eval``: first caption, own
 length, raw ``fit=False, separate=False``) and scored raw and delivered
 (:func:`umf.pipeline.delivered_joints`): scenes passing every check, per relation, per check
-kind, and how each person k >= 3 relates to those before it (closest joints to anyone
-earlier). ``--pairs`` scores the split's two-person scenes instead (what ``--set
-pair_steps=N`` was chosen on). ``--set`` changes an ``sflow`` config value for the run.
+kind, in any order of the people a group's caption does not tell apart
+(:func:`umf.eval.relations.any_order_checks`), and how each person k >= 3 relates to those
+before it (closest joints to anyone earlier). ``--pairs`` scores the split's two-person
+scenes instead (what ``--set pair_steps=N`` was chosen on). ``--set`` changes an ``sflow``
+config value for the run.
 
 ``--context`` tries other contexts for person k >= 3 than everybody before them (``all``,
 the method's): person 1 alone (``leader``), person k - 1 alone (``previous``), or person k - 1
@@ -89,8 +91,10 @@ def patch_context(mode: str) -> None:
 
 def score(records: list[dict], joints: list[np.ndarray]) -> dict:
     from umf.data.relations import check_record
+    from umf.eval.relations import any_order_checks
 
     scenes = defaultdict(list)
+    loose = defaultdict(list)
     kinds = defaultdict(list)
     by_rel_kind = defaultdict(list)
     for r, j in zip(records, joints, strict=True):
@@ -98,6 +102,9 @@ def score(records: list[dict], joints: list[np.ndarray]) -> dict:
         ok = all(c.passed for c in res)
         scenes[r["relation"]].append(ok)
         scenes["all"].append(ok)
+        free = all(c.passed for c in any_order_checks(r, j))
+        loose[r["relation"]].append(free)
+        loose["all"].append(free)
         for c in res:
             kinds[c.type].append(c.passed)
             by_rel_kind[f"{r['relation']}/{c.type}"].append(c.passed)
@@ -106,6 +113,7 @@ def score(records: list[dict], joints: list[np.ndarray]) -> dict:
     return {
         "failing": len(scenes["all"]) - sum(scenes["all"]),  # scenes failing a check
         "scenes": {k: mean(v) for k, v in sorted(scenes.items())},
+        "any_order": {k: mean(v) for k, v in sorted(loose.items())},
         "kinds": {k: mean(v) for k, v in sorted(kinds.items())},
         "relation_kinds": {k: mean(v) for k, v in sorted(by_rel_kind.items())},
         "closest_m": [round(float(np.median(gaps)), 3) if gaps else None],
@@ -182,6 +190,10 @@ def main() -> None:
             f"(median) {s['closest_m'][0]} m"
         )
         print("  relations: " + ", ".join(f"{k} {v}" for k, v in s["scenes"].items()))
+        print(
+            "  in any order (umf.eval.relations.any_order_checks): "
+            + ", ".join(f"{k} {v}" for k, v in s["any_order"].items())
+        )
         print("  kinds: " + ", ".join(f"{k} {v}" for k, v in s["kinds"].items()))
         for k, v in s["relation_kinds"].items():
             if v < 1.0:

@@ -136,3 +136,62 @@ def test_real_scene_joints(scenes, bandai_clips, actors):
     corpus = SimpleNamespace(clips=bandai_clips)
     for a, b in zip(real_scene_joints(corpus, recipes), joints, strict=True):
         np.testing.assert_array_equal(a, b)
+
+
+def _groups(scenes, relation):
+    return [(r, j) for r, j in zip(*scenes, strict=True) if r.get("relation") == relation]
+
+
+def test_any_order_reads_a_row_in_any_order(scenes):
+    """A real row with its people shuffled fails the strict reading (each next person on the
+    previous one's left) and passes in any order; a real pair keeps its order."""
+    from umf.eval.relations import any_order_checks
+
+    rows = [(r, j) for r, j in zip(*scenes, strict=True)
+            if r.get("relation") in ("group_line", "single_file")]  # fmt: skip
+    if not rows:
+        pytest.skip("the bundled clips composed no row or single file")
+    for r, j in rows:
+        reversed_ = j[::-1].copy()
+        assert not all(c.passed for c in scene_checks(r, reversed_))
+        loose = any_order_checks(r, reversed_)
+        assert all(c.passed for c in loose) and len(loose) == len(r["constraints"])
+    pair_r, pair_j = next((r, j) for r, j in zip(*scenes, strict=True)
+                          if any(c["type"] == "side" for c in r["constraints"])
+                          and r["num_people"] == 2)  # fmt: skip
+    swapped = pair_j[::-1].copy()
+    assert [c.passed for c in any_order_checks(pair_r, swapped)] == [
+        c.passed for c in scene_checks(pair_r, swapped)
+    ]
+
+
+def test_any_order_keeps_the_named_role_and_real_failures(scenes):
+    """Before an audience, person 1 (who bows or calls) stays person 1; a scene that fails
+    whatever the order (everyone turned around) still fails."""
+    from umf.eval.relations import INTERCHANGEABLE, any_order_checks
+
+    assert INTERCHANGEABLE["audience"] == 1 and "walk_side_by_side" not in INTERCHANGEABLE
+    groups = [(r, j) for r, j in zip(*scenes, strict=True) if r["num_people"] >= 3]
+    assert groups
+    for r, j in groups:
+        turned = np.stack([_turn_around(p) for p in j])
+        faces = [c for c in r["constraints"] if c["type"] in ("faces", "same_heading")]
+        if r["relation"] in ("audience", "gather", "circle_greet") and faces:
+            assert not all(c.passed for c in any_order_checks(r, turned))
+        if r["relation"] in ("audience", "gather"):  # the leader swapped in: it fails
+            swapped = j[[1, 0, *range(2, len(j))]].copy()
+            assert not all(c.passed for c in any_order_checks(r, swapped))
+
+
+def test_relation_accuracy_reports_any_order(scenes):
+    recipes, joints = scenes
+    shuffled = [j[::-1].copy() if r["num_people"] >= 3 and r["relation"] in
+                ("group_line", "single_file", "circle_greet") else j
+                for r, j in zip(recipes, joints, strict=True)]  # fmt: skip
+    out = relation_accuracy(recipes, shuffled)
+    assert out["any_order"]["scene_accuracy"] == 1.0
+    changed = sum(s is not j for s, j in zip(shuffled, joints, strict=True))
+    if changed:
+        assert out["scene_accuracy"] < 1.0
+    pairs_only = [(r, j) for r, j in zip(recipes, joints, strict=True) if r["num_people"] == 2]
+    assert "any_order" not in relation_accuracy(*map(list, zip(*pairs_only, strict=True)))

@@ -100,6 +100,10 @@ def test_quick_eval_end_to_end(setup):
         assert set(m["physics"][name]) == {"real", "tiny", "reaction-only", "tiny, delivered"}
         assert "tiny, delivered" in m["relations"][name]
         assert m["physics"][name]["real"]["penetration_cm"][0] == 0.0  # composer keeps apart
+    # groups are also read in any order of the people their captions leave open; pairs not
+    loose = m["relations"]["groups"]["tiny"]["any_order"]
+    assert loose["scene_accuracy"] >= m["relations"]["groups"]["tiny"]["scene_accuracy"]
+    assert "any_order" not in m["relations"]["pairs"]["tiny"]
     assert m["relations"]["all"]["real"]["num_scenes"] == 8 + 3
     assert {r["variant"] for r in m["accumulation"]} == {"tiny", "reaction-only"}
     assert {r["N"] for r in m["accumulation"]} == {2, 3, 4}
@@ -111,6 +115,7 @@ def test_quick_eval_end_to_end(setup):
     assert "umf eval --checkpoint" in text and "--quick" in text
     assert "groups of 8 instead of 96" in text and "![examples](examples.png)" in text
     assert "inter-person penetration (cm) ↓, groups, delivered" in text
+    assert "people the caption leaves open in any order" in text
     assert set(m["motion"]) == {"tiny", "tiny, delivered", "reaction-only"}
     assert m["meta"]["split"] == "test" and "single-person test clips" in text
 

@@ -114,6 +114,9 @@ def protocol_markdown(section: dict[str, Any], title: str) -> str:
     return head + "\n\n" + md_table(["metric", *sources], rows)
 
 
+ANY_ORDER = "scenes passing every check, people the caption leaves open in any order ↑"
+
+
 def relations_markdown(relations: dict[str, dict[str, Any]]) -> str:
     parts = []
     for name, by_source in relations.items():
@@ -122,6 +125,12 @@ def relations_markdown(relations: dict[str, dict[str, Any]]) -> str:
         rows = [
             ["scenes passing every check ↑"]
             + [fmt(a["scene_accuracy"], a["scene_accuracy_ci"]) for a in by_source.values()],
+        ]
+        if any("any_order" in a for a in by_source.values()):
+            rows.append([ANY_ORDER] + [
+                fmt(a["any_order"]["scene_accuracy"], a["any_order"].get("scene_accuracy_ci"))
+                if "any_order" in a else "—" for a in by_source.values()])  # fmt: skip
+        rows += [
             ["checks passed ↑"] + [fmt(a["check_accuracy"]) for a in by_source.values()],
             ["mean over check kinds ↑"] + [fmt(a["kind_accuracy"]) for a in by_source.values()],
         ]
@@ -132,6 +141,11 @@ def relations_markdown(relations: dict[str, dict[str, Any]]) -> str:
         rels = sorted({k for a in by_source.values() for k in a["by_relation"]})
         rows += [[f"relation: {r}"] + [fmt(a["by_relation"].get(r)) for a in by_source.values()]
                  for r in rels]  # fmt: skip
+        if any("any_order" in a for a in by_source.values()):
+            rows += [[f"relation: {r}, any order"]
+                     + [fmt(a["any_order"]["by_relation"].get(r)) if "any_order" in a else "—"
+                        for a in by_source.values()]
+                     for r in rels]  # fmt: skip
         title = f"**{name}** ({first['num_scenes']} scenes, {first['num_checks']} checks)"
         parts.append(title + "\n\n" + md_table(["", *sources], rows))
     return "\n\n".join(parts)
@@ -268,7 +282,11 @@ def render_markdown(results: dict[str, Any]) -> str:
         "## 2. Relation accuracy",
         "",
         "Generated from each test scene's first caption with its number of people and "
-        "length; checked against the scene's relation record (`umf.eval.relations`).",
+        "length; checked against the scene's relation record (`umf.eval.relations`). "
+        "A group's record was composed in one order of its people (each next person of a "
+        "row on the previous one's left), which its caption does not name; the row \"people "
+        'the caption leaves open in any order" reads each group in the order of those '
+        "people that passes most checks.",
         "",
     ]
     if results.get("relations"):

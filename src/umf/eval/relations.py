@@ -11,11 +11,16 @@ directions and distances, so they are invariant to any turn about +Y and any
 translation: a generated scene in person 1's canonical frame and a corpus scene in
 another frame are compared as they are, provided people come in the record's order.
 Mirroring is *not* an invariance (left and right swap), and neither is a change of
-people order.
+people order: the strict reading wants people in the record's order. A group caption
+("three people walk side by side.") does not say who stands where, while the record was
+composed in one order (each next person on the previous one's left). So groups are also
+read in any order of the people their caption does not tell apart
+(:data:`INTERCHANGEABLE`, :func:`any_order_checks`), beside the strict reading.
 """
 
 from __future__ import annotations
 
+import itertools
 from collections.abc import Sequence
 from typing import Any
 
@@ -51,6 +56,53 @@ def scene_checks(record: dict[str, Any], joints: Any, fps: float = FPS) -> list[
             f"joints are {j.shape}"
         )
     return [check(j, _at_fps(c, fps, j.shape[1])) for c in record["constraints"]]
+
+
+# relation -> the first person (0-based) from whom on its captions tell nobody apart: anyone
+# in a row, a single file or a circle; everyone but the caller or the bower before an
+# audience or a gathering. Pairs name their roles ("the second person on the first one's
+# left", "one person bows and the other bows back"): not listed, read in order only.
+INTERCHANGEABLE = {"group_line": 0, "single_file": 0, "circle_greet": 0, "audience": 1,
+                   "gather": 1}  # fmt: skip
+MAX_ORDERS = 720  # 6 people: every order is tried
+
+
+def any_order_checks(record: dict[str, Any], joints: Any, fps: float = FPS) -> list[CheckResult]:
+    """:func:`scene_checks` in the order of the people the caption leaves open
+    (:data:`INTERCHANGEABLE`) that passes the most checks (the record's own order on a
+    tie); people are renumbered back, so the results name the scene's people. A record of
+    another relation is read in order."""
+    j = as_numpy(joints)
+    first = INTERCHANGEABLE.get(record.get("relation", ""))
+    strict = scene_checks(record, j, fps)
+    n = j.shape[0]
+    if first is None or n - first < 2 or all(r.passed for r in strict):
+        return strict
+    constraints = [_at_fps(c, fps, j.shape[1]) for c in record["constraints"]]
+    cache: dict[tuple[int, int, int], CheckResult] = {}
+
+    def result(i: int, c: dict[str, Any], order: tuple[int, ...]) -> CheckResult:
+        if "a" not in c and "b" not in c:  # no_contact: the same in any order
+            key = (i, -1, -1)
+        else:
+            key = (i, order[c.get("a", 0)], order[c.get("b", 1)])
+        if key not in cache:
+            moved = dict(c)
+            if key[1] >= 0:
+                moved["a"], moved["b"] = key[1], key[2]
+            cache[key] = check(j, moved)
+        return cache[key]
+
+    best, best_passed = strict, sum(r.passed for r in strict)
+    for tail in itertools.islice(itertools.permutations(range(first, n)), MAX_ORDERS):
+        order = (*range(first), *tail)
+        res = [result(i, c, order) for i, c in enumerate(constraints)]
+        passed = sum(r.passed for r in res)
+        if passed > best_passed:
+            best, best_passed = res, passed
+            if passed == len(res):
+                break
+    return best
 
 
 def _rate(flags: Sequence[bool]) -> float:
@@ -107,12 +159,18 @@ def relation_accuracy(
         accuracies), ``by_kind`` ({kind: {accuracy, count}} for faces, faces_away,
         distance, side, order, same_heading, approach, retreat, starts_after,
         no_contact), ``by_relation`` and ``by_num_people`` (scene accuracy), counts,
-        and ``reference`` when given.
+        ``any_order`` (``scene_accuracy``, ``by_relation``, ``by_kind`` of
+        :func:`any_order_checks`) where a record has people its caption does not tell
+        apart, and ``reference`` when given.
     """
     if len(records) != len(joints_list):
         raise ValueError(f"{len(records)} records but {len(joints_list)} scenes")
     results = [scene_checks(r, j, fps) for r, j in zip(records, joints_list, strict=True)]
     out = accuracy_from_checks(records, results)
+    if any(r.get("relation") in INTERCHANGEABLE for r in records):
+        loose = [any_order_checks(r, j, fps) for r, j in zip(records, joints_list, strict=True)]
+        acc = accuracy_from_checks(records, loose)
+        out["any_order"] = {k: acc[k] for k in ("scene_accuracy", "by_relation", "by_kind")}
     if reference is not None:
         out["reference"] = relation_accuracy(records, reference, FPS)
     return out

@@ -145,6 +145,9 @@ def accuracy_summary(records: Sequence[dict[str, Any]], joints: Sequence[np.ndar
     """:func:`relation_accuracy` plus the 95% CI of its scene accuracy."""
     acc = relation_accuracy(records, joints, FPS)
     acc["scene_accuracy_ci"] = proportion_ci(acc["scene_accuracy"], acc["num_scenes"])
+    if "any_order" in acc:
+        loose = acc["any_order"]
+        loose["scene_accuracy_ci"] = proportion_ci(loose["scene_accuracy"], acc["num_scenes"])
     return acc
 
 
