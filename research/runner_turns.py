@@ -1,6 +1,6 @@
 """How much runners side by side turn: the P-Flow's leader against the training crops.
 
-    python research/runner_turns.py [MODEL_DIR] [--corpus CORPUS] [--seeds 8]
+    python research/runner_turns.py [MODEL_DIR] [--corpus CORPUS] [--seeds 8] [--causes]
 
 1. The train split's ``run_side_by_side`` scenes as the S-Flow and the reaction bank see
    them (4-second crops, person 1's frame, the model's ``repeat_scene_gait``): how far each
@@ -12,6 +12,9 @@
    delivered): the leader's turn, chord and path speed, and each follower's start and end
    along the leader's heading and speed over the leader's (``research/keep_pace.py``'s
    measure; FAIL: someone ends more than 1 m behind).
+3. With ``--causes``: how long the training runners last and how many of them the flows'
+   crops carry to 4 s, whether the VAE bends them, and the P-Flow's leader alone ("A person
+   runs.", and the pair's prompt at other step budgets and guidance scales).
 """
 
 from __future__ import annotations
@@ -65,6 +68,69 @@ def training_turns(pipe, corpus) -> None:
           f"{p50:.2f} m/s (median), {p90:.2f} (p90)")  # fmt: skip
 
 
+def scene_lengths(pipe, corpus) -> None:
+    """How long the train split's runners side by side last (frames), and how many of them
+    reach 4 s as the P-Flow's (140-160 frames) and the S-Flow's crops see them: without
+    and with ``repeat_scene_gait`` (the gait carried on, ``scene_gait_periods``)."""
+    from umf.train.datasets import SceneDataset
+
+    frames = [r["num_frames"] for r in corpus.scenes.get("train", [])
+              if r.get("relation") == "run_side_by_side"]  # fmt: skip
+    under = float(np.mean(np.asarray(frames) < 2 * HALF))
+    print(f"3. train runners side by side: {len(frames)} scenes, {np.median(frames):.0f} "
+          f"frames at the median, {under:.0%} under {2 * HALF}")  # fmt: skip
+    for gait in (False, True):
+        ds = SceneDataset(corpus, "train", pipe.normalizer, min_frames=140, max_frames=160,
+                          mirror=False, seed=0, repeat_gait=gait)  # fmt: skip
+        long = sum(ds[i]["features"].shape[1] > 2 * HALF
+                   for i, (kind, item, _) in enumerate(ds.items)
+                   if kind == "scene" and item.get("relation") == "run_side_by_side")  # fmt: skip
+        print(f"3. crops of 140-160 frames, repeat_scene_gait {gait}: {long} reach "
+              f"{2 * HALF + 1} frames")  # fmt: skip
+
+
+def vae_turns(pipe, corpus) -> None:
+    """Person 1 of the training crops through the VAE (posterior mean, decoded as the
+    pipeline decodes person 1): does the VAE bend a straight runner?"""
+    from umf.representation import joints_to_features
+
+    real, back = [], []
+    for j in run_crops(pipe, corpus, 2 * HALF):
+        f = joints_to_features(torch.from_numpy(j[0]).float())[None]
+        z = pipe._encode(f)
+        out = pipe.decode(z, f.shape[1])[0]
+        joints = out[:, :66].reshape(-1, 22, 3).numpy()
+        real.append(turn_deg(j[0, :, 0][:, [0, 2]]))
+        back.append(turn_deg(joints[:, 0][:, [0, 2]]))
+    for name, t in (("real", real), ("VAE", back)):
+        p10, p50, p90 = np.percentile(t, [10, 50, 90])
+        print(f"3. training crops ({len(t)}), person 1, {name}: turn p10 / median / p90 "
+              f"{p10:+.1f} / {p50:+.1f} / {p90:+.1f} deg")  # fmt: skip
+
+
+def leader_turns(pipe, seeds: int) -> None:
+    """The P-Flow's person 1 alone: a runner of one's own against the pair's leader, and the
+    pair's leader at other step budgets and guidance scales."""
+    cfg = pipe.config.pflow
+    steps, guidance = list(cfg.steps), cfg.guidance
+    runs = [("A person runs.", 1, steps, guidance)]
+    runs += [("Two people run side by side.", 2, st, g)
+             for st, g in ((steps, guidance), ([45, 5], guidance), ([20, 20], guidance),
+                           (steps, 1.0), (steps, 3.0))]  # fmt: skip
+    for prompt, n, st, g in runs:
+        cfg.steps, cfg.guidance = st, g
+        turns = []
+        for s in range(seeds):
+            (scene,) = pipe(prompt, num_people=n, seconds=4.0, seed=s)
+            turns.append(turn_deg(np.asarray(scene.joints[0, :, 0])[:, [0, 2]]))
+        print(
+            f"3. {prompt!r} ({n} people), steps {st}, guidance {g:g}: leader turns "
+            + " ".join(f"{t:+.0f}" for t in turns)
+            + f" deg, median {np.median(turns):+.0f}"
+        )
+    cfg.steps, cfg.guidance = steps, guidance
+
+
 def generated_turns(pipe, seeds: int) -> None:
     fps = pipe.config.fps
     for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
@@ -90,6 +156,9 @@ def main() -> None:
     ap.add_argument("model", nargs="?", default=None)
     ap.add_argument("--corpus", default="out/corpus")
     ap.add_argument("--seeds", type=int, default=8)
+    ap.add_argument("--causes", action="store_true",
+                    help="also 3.: the runners' scene lengths, the VAE's round trip of them, "
+                    "and the P-Flow's leader alone, at other steps and guidance")  # fmt: skip
     args = ap.parse_args()
 
     from umf.data.corpus import Corpus
@@ -97,8 +166,13 @@ def main() -> None:
 
     torch.set_grad_enabled(False)
     pipe = UMFPipeline.from_pretrained(args.model)
-    training_turns(pipe, Corpus.load(args.corpus))
+    corpus = Corpus.load(args.corpus)
+    training_turns(pipe, corpus)
     generated_turns(pipe, args.seeds)
+    if args.causes:
+        scene_lengths(pipe, corpus)
+        vae_turns(pipe, corpus)
+        leader_turns(pipe, args.seeds)
 
 
 if __name__ == "__main__":

@@ -9,6 +9,7 @@ from typing import Any
 
 from umf.eval import accumulation as A
 from umf.eval.plan import delivered_name
+from umf.eval.relations import INTERCHANGEABLE
 
 PHYSICS_KEYS: dict[str, str] = {
     "penetration_cm": "inter-person penetration (cm) ↓",
@@ -145,7 +146,7 @@ def relations_markdown(relations: dict[str, dict[str, Any]]) -> str:
             rows += [[f"relation: {r}, any order"]
                      + [fmt(a["any_order"]["by_relation"].get(r)) if "any_order" in a else "—"
                         for a in by_source.values()]
-                     for r in rels]  # fmt: skip
+                     for r in rels if r in INTERCHANGEABLE]  # fmt: skip
         title = f"**{name}** ({first['num_scenes']} scenes, {first['num_checks']} checks)"
         parts.append(title + "\n\n" + md_table(["", *sources], rows))
     return "\n\n".join(parts)
