@@ -205,6 +205,38 @@ def test_a_shortlist_by_caption_restricts_the_candidates(tmp_path):
         ReactionBank.load(tmp_path)
 
 
+def _captioned(angles: list[float]) -> torch.Tensor:
+    """Unit caption embeddings (N, 2) at these angles (radians) from the x axis."""
+    a = torch.tensor(angles)
+    return torch.stack([a.cos(), a.sin()], dim=1)
+
+
+def test_a_margin_keeps_a_far_prompt_to_its_nearest_captions():
+    """A prompt worded like no caption (cosine below 1 - margin to all) shortlists only the
+    captions within the margin of its nearest one; a prompt worded like a caption keeps the
+    whole shortlist; margin 0 changes nothing."""
+    # 6 reactions: 3 of caption A (0 rad), 3 of caption B (0.6 rad: cosine 0.83 to A)
+    texts = _captioned([0.0, 0.0, 0.0, 0.6, 0.6, 0.6])
+    latents = torch.zeros(6, P, R)
+    latents[:, 0, 0] = torch.arange(6.0)
+    bank = ReactionBank({30: latents}, {30: texts})
+    query = latents[[4]]  # the first pass is nearest reaction 4 (caption B)
+
+    def picks(prompt, margin):
+        got = [nearest(bank, query, 30, 6, torch.Generator().manual_seed(s), prompt=prompt,
+                       shortlist=6, margin=margin)[0] for s in range(40)]  # fmt: skip
+        return {int(g[0, 0, 0]) for g in got}
+
+    far = _captioned([-0.45])  # cosine 0.90 to A, 0.50 to B: worded like neither
+    assert picks(far, 0.0) == set(range(6))
+    assert picks(far, 0.05) == {0, 1, 2}  # only A's: B is 0.40 further than A
+    assert picks(far, 0.4) == set(range(6))  # within 0.4 of A: worded like a caption
+    assert picks(_captioned([0.0]), 0.05) == set(range(6))  # A's own wording: all compete
+    listed = bank._shortlisted(30, torch.cat([far, _captioned([0.0])]), 6, query.flatten(1),
+                               margin=0.05)  # fmt: skip
+    assert listed.tolist() == [[True] * 3 + [False] * 3, [True] * 6]  # row by row
+
+
 def test_a_pace_restricts_the_candidates_to_reactions_travelling_as_the_first_pass(tmp_path):
     """With velocities, only reactions whose pelvis velocity is within ``pace`` x the
     query's speed of it compete (speed and direction), and the ``neighbours`` nearest in

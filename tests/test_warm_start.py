@@ -166,6 +166,8 @@ def test_warm_start_out_of_range_is_refused(value):
     ("sflow.own_warm=1.0", "own_warm"), ("sflow.own_warm=-0.5", "own_warm"),
     ("pflow.person_composition=or", "person_composition"),
     ("sflow.warm_side=true", "warm_side needs"),  # the tiny config has no shortlist
+    ("sflow.warm_margin=0.15", "warm_margin needs"),
+    ("sflow.warm_margin=1.5", "warm_margin"), ("sflow.warm_margin=-0.1", "warm_margin"),
 ])  # fmt: skip
 def test_own_prompt_options_out_of_range_are_refused(option, match):
     from conftest import tiny_config

@@ -46,7 +46,7 @@ _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats >
 # floats in [0, 1]
 _FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop", "p_scene_drop",
               "foot_loss_min_t", "place_loss_max_t", "warm_start", "own_warm",
-              "warm_together", "warm_take"}  # fmt: skip
+              "warm_together", "warm_take", "warm_margin"}  # fmt: skip
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -133,6 +133,9 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         sflow = config.sflow
         if sflow.warm_side and not (sflow.warm_proposal == "retrieved" and sflow.warm_shortlist):
             raise UMFError("sflow.warm_side needs sflow.warm_proposal 'retrieved' and "
+                           "sflow.warm_shortlist > 0 (it narrows that shortlist)")  # fmt: skip
+        if sflow.warm_margin and not (sflow.warm_proposal == "retrieved" and sflow.warm_shortlist):
+            raise UMFError("sflow.warm_margin needs sflow.warm_proposal 'retrieved' and "
                            "sflow.warm_shortlist > 0 (it narrows that shortlist)")  # fmt: skip
         if sflow.warm_together and not (sflow.warm_proposal == "retrieved" and sflow.warm_pace):
             raise UMFError("sflow.warm_together needs sflow.warm_proposal 'retrieved' and "

@@ -267,15 +267,22 @@ class ReactionBank:
         return self._gap(length, velocity) <= tolerance
 
     def _shortlisted(self, length: int, prompt: Tensor | None, shortlist: int,
-                     like: Tensor, mirror: Tensor | None = None) -> Tensor | None:  # fmt: skip
+                     like: Tensor, mirror: Tensor | None = None,
+                     margin: float = 0.0) -> Tensor | None:  # fmt: skip
         """(B, N) the ``shortlist`` reactions whose captions are nearest each row's prompt
         (B, D), or None where every reaction competes (no prompt, no shortlist, or a bank
         without captions). ``mirror`` (B, D): each prompt with its side words swapped; then
-        only captions at least as near the prompt as its mirror image compete."""
+        only captions at least as near the prompt as its mirror image compete. ``margin``
+        > 0: a row whose prompt is farther than ``margin`` (cosine) from every caption keeps
+        only the captions within ``margin`` of its nearest one."""
         if prompt is None or shortlist <= 0 or length not in self.texts:
             return None
         captions = self.texts[length].to(like)
         sims = prompt.to(like) @ captions.T  # (B, N)
+        if margin > 0:
+            best = sims.max(dim=1, keepdim=True).values
+            far = best < 1.0 - margin  # worded like no caption: a group's, a paraphrase
+            sims = sims.masked_fill(far & (sims < best - margin), -torch.inf)
         if mirror is not None:  # the other side's captions are nearer the mirror image
             same = sims >= mirror.to(like) @ captions.T - SAME_SIDE
             same[~same.any(dim=1)] = True  # no caption on a row's side: every caption
@@ -347,6 +354,7 @@ class ReactionBank:
         mirror: Tensor | None = None,
         stand: Tensor | None = None,
         avoid: Tensor | None = None,
+        margin: float = 0.0,
     ) -> tuple[int, Tensor, Tensor]:
         """For each row of ``query`` (B, p, r) a real reaction: the stored length it is of, its
         index (B,) there and (B,) whether the row had one at its pace. The reaction is one of the
@@ -367,13 +375,15 @@ class ReactionBank:
         row with no reaction on its side, ignores it). ``avoid`` (B, M, 2): where people
         already in each row's scene start on the floor (x, z in person 1's frame); only the
         reactions starting at least ``SPOT`` from all of them compete (a row with none keeps
-        what it had; NaN points stand for nobody). Whether each row had one within its
+        what it had; NaN points stand for nobody). ``margin`` > 0: a prompt farther than it
+        from every caption shortlists only captions within it of its nearest one
+        (``sflow.warm_margin``). Whether each row had one within its
         pace is all True without a pace, so a caller can keep what it had rather than take a
         reaction at the wrong pace."""
         length = self.bucket(frames)
         bank = self.latents[length].to(query)
         d = torch.cdist(scale(query).flatten(1), scale(bank).flatten(1))
-        listed = self._shortlisted(length, prompt, shortlist, d, mirror)
+        listed = self._shortlisted(length, prompt, shortlist, d, mirror, margin)
         allowed = listed
         if avoid is not None and avoid.shape[1] and length in self.starts:
             allowed = self._free(length, avoid.to(d), allowed)

@@ -301,7 +301,7 @@ def proposal(
         length, idx, fits = bank.pick(first, frames, cfg.warm_neighbours, generator,
                                       pipe.sflow.latent_norm.normalize, prompt,
                                       cfg.warm_shortlist, velocity, cfg.warm_pace,
-                                      side, stand, avoid)  # fmt: skip
+                                      side, stand, avoid, cfg.warm_margin)  # fmt: skip
         z, waits = bank.latents[length].to(first)[idx], None
         if together is not None and length in bank.velocities:
             # beside a leader, a reaction nearer the leader's pace than the first pass fits,
