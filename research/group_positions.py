@@ -46,8 +46,10 @@ def main() -> None:
           " left / ahead of person 1 (m), start -> end")  # fmt: skip
     for s in range(args.seeds):
         (scene,) = pipe(args.prompt, num_people=args.people, seconds=args.seconds, seed=s)
-        people = [f"P{k} left {l0:+.2f} -> {l1:+.2f}, ahead {f0:+.2f} -> {f1:+.2f}"
-                  for k, (l0, l1, f0, f1) in enumerate(positions(np.asarray(scene.joints)), 2)]
+        people = [
+            f"P{k} left {l0:+.2f} -> {l1:+.2f}, ahead {f0:+.2f} -> {f1:+.2f}"
+            for k, (l0, l1, f0, f1) in enumerate(positions(np.asarray(scene.joints)), 2)
+        ]
         print(f"seed {s}: " + " | ".join(people))
 
 

@@ -165,6 +165,21 @@ def test_any_order_reads_a_row_in_any_order(scenes):
     ]
 
 
+def test_any_order_reads_too_many_people_as_recorded(scenes, monkeypatch):
+    """More interchangeable people than MAX_PERMUTED: the recorded order, not a truncated
+    search (with 6 allowed the protocol's groups are searched whole)."""
+    import umf.eval.relations as rel
+
+    r, j = next((r, j) for r, j in zip(*scenes, strict=True)
+                if r.get("relation") == "group_line")  # fmt: skip
+    shuffled = j[::-1].copy()
+    assert all(c.passed for c in rel.any_order_checks(r, shuffled))
+    monkeypatch.setattr(rel, "MAX_PERMUTED", r["num_people"] - 1)
+    assert [c.passed for c in rel.any_order_checks(r, shuffled)] == [
+        c.passed for c in scene_checks(r, shuffled)
+    ]
+
+
 def test_any_order_keeps_the_named_role_and_real_failures(scenes):
     """Before an audience, person 1 (who bows or calls) stays person 1; a scene that fails
     whatever the order (everyone turned around) still fails."""

@@ -103,6 +103,8 @@ def test_quick_eval_end_to_end(setup):
     # groups are also read in any order of the people their captions leave open; pairs not
     loose = m["relations"]["groups"]["tiny"]["any_order"]
     assert loose["scene_accuracy"] >= m["relations"]["groups"]["tiny"]["scene_accuracy"]
+    assert set(loose["by_relation"]) == set(m["relations"]["groups"]["tiny"]["by_relation"])
+    assert 0.0 <= loose["scene_accuracy_ci"] < 1.0
     assert "any_order" not in m["relations"]["pairs"]["tiny"]
     assert m["relations"]["all"]["real"]["num_scenes"] == 8 + 3
     assert {r["variant"] for r in m["accumulation"]} == {"tiny", "reaction-only"}

@@ -247,13 +247,7 @@ class SFlowConfig:
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
     # as near it as its mirror image (side words swapped): people on the side it names
     warm_side: bool = False
-    # > 0, with a shortlist: a prompt farther than this (cosine) from every caption of the
-    # bank (a group's caption, a paraphrase) retrieves only among the reactions whose captions
-    # are within it of its nearest one. Its shortlist was filled with other relations'
-    # reactions (a single file's with side-by-side ones, which its first pass's side then
-    # chose); a prompt worded like a caption keeps the shortlist whole
-    # (results/umf-small-bandai-20261214)
-    warm_margin: float = 0.0
+    warm_margin: float = 0.0  # > 0: see umf.reaction_bank.ReactionBank._shortlisted (margin)
     # > 0: where the reactions of the prompt's nearest caption waited a median of at least
     # this many frames after their person 1 (the bank's lags), a real answer retrieved among
     # them is moved in time to wait as long after the generated person 1, and replaces the

@@ -273,8 +273,14 @@ class ReactionBank:
         (B, D), or None where every reaction competes (no prompt, no shortlist, or a bank
         without captions). ``mirror`` (B, D): each prompt with its side words swapped; then
         only captions at least as near the prompt as its mirror image compete. ``margin``
-        > 0: a row whose prompt is farther than ``margin`` (cosine) from every caption keeps
-        only the captions within ``margin`` of its nearest one."""
+        > 0 (``sflow.warm_margin``): a row whose prompt is farther than ``margin`` (cosine)
+        from every caption (a group's caption: the bank holds pairs; a paraphrase) keeps only
+        the captions within ``margin`` of its nearest one, which is taken before the mirror
+        test. Without it, "three people walk in single file." shortlisted 40 single-file
+        reactions and 24 side-by-side ones to fill its list, and the first pass's side then
+        chose those (results/umf-small-bandai-20261214). A prompt worded like a caption keeps
+        the whole list: narrowed, "Two people run side by side." lost partners at its pace.
+        Few may be left: "A person calls and four people walk over to them." keeps 3."""
         if prompt is None or shortlist <= 0 or length not in self.texts:
             return None
         captions = self.texts[length].to(like)

@@ -60,23 +60,26 @@ def scene_checks(record: dict[str, Any], joints: Any, fps: float = FPS) -> list[
 
 # relation -> the first person (0-based) from whom on its captions tell nobody apart: anyone
 # in a row, a single file or a circle; everyone but the caller or the bower before an
-# audience or a gathering. Pairs name their roles ("the second person on the first one's
-# left", "one person bows and the other bows back"): not listed, read in order only.
+# audience or a gathering (whose checks are the same for each of the others, so that any
+# order reads as the recorded one: listed for completeness). Pairs name their roles ("the
+# second person on the first one's left", "one person bows and the other bows back"): not
+# listed, read in order only.
 INTERCHANGEABLE = {"group_line": 0, "single_file": 0, "circle_greet": 0, "audience": 1,
                    "gather": 1}  # fmt: skip
-MAX_ORDERS = 720  # 6 people: every order is tried
+MAX_PERMUTED = 6  # people whose every order is tried (720); more are read as recorded
 
 
 def any_order_checks(record: dict[str, Any], joints: Any, fps: float = FPS) -> list[CheckResult]:
     """:func:`scene_checks` in the order of the people the caption leaves open
     (:data:`INTERCHANGEABLE`) that passes the most checks (the record's own order on a
     tie); people are renumbered back, so the results name the scene's people. A record of
-    another relation is read in order."""
+    another relation, or with more than :data:`MAX_PERMUTED` such people (the protocol's
+    groups have at most 6), is read in order."""
     j = as_numpy(joints)
     first = INTERCHANGEABLE.get(record.get("relation", ""))
     strict = scene_checks(record, j, fps)
     n = j.shape[0]
-    if first is None or n - first < 2 or all(r.passed for r in strict):
+    if first is None or not 2 <= n - first <= MAX_PERMUTED or all(r.passed for r in strict):
         return strict
     constraints = [_at_fps(c, fps, j.shape[1]) for c in record["constraints"]]
     cache: dict[tuple[int, int, int], CheckResult] = {}
@@ -94,7 +97,7 @@ def any_order_checks(record: dict[str, Any], joints: Any, fps: float = FPS) -> l
         return cache[key]
 
     best, best_passed = strict, sum(r.passed for r in strict)
-    for tail in itertools.islice(itertools.permutations(range(first, n)), MAX_ORDERS):
+    for tail in itertools.permutations(range(first, n)):
         order = (*range(first), *tail)
         res = [result(i, c, order) for i, c in enumerate(constraints)]
         passed = sum(r.passed for r in res)
