@@ -248,6 +248,24 @@ def test_people_3_to_n_start_off_the_spots_of_those_before_them(pipe):
         assert min(gaps) >= 0.5 and float(np.median(gaps)) >= 0.8, (prompt, gaps)
 
 
+def test_a_single_file_of_three_walks_in_file(pipe):
+    """ "Three people walk in single file.", 4 s, seeds 0-7, delivered: at the end each
+    person stands at least 1 m behind the one before along person 1's heading in at least 6
+    seeds. 20261213 did so in 3 (person 2 beside the leader: the caption shortlist had
+    filled with side-by-side reactions); 20261214's ``sflow.warm_margin`` in 7
+    (results/umf-small-bandai-20261214)."""
+    from umf.data.relations import lateral_offset
+
+    filed = []
+    for seed in range(8):
+        (scene,) = pipe("Three people walk in single file.", num_people=3, seconds=4.0,
+                        seed=seed)  # fmt: skip
+        j = np.asarray(scene.joints)
+        ahead = [0.0] + [float(lateral_offset(j, 0, k, j.shape[1] - 1)[1]) for k in (1, 2)]
+        filed.append(all(ahead[k - 1] - ahead[k] >= 1.0 for k in (1, 2)))
+    assert sum(filed) >= 6, filed
+
+
 def test_a_bow_back_waits_for_the_bow(pipe):
     """ "One person bows and the other bows back.", 4 s, seeds 0-7: person 2's bow starts at
     least 8 frames after person 1's (the starts_after check's reading) in at least 7 seeds,
