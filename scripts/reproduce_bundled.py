@@ -160,7 +160,8 @@ NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_s
          "sflow.warm_shortlist=64", "pflow.person_composition=and",
          "sflow.own_warm=0.5", "sflow.warm_side=true", "sflow.warm_timing=8",
          "sflow.warm_together=0.8", "vae.pin_leader_start=true", "sflow.warm_play=true",
-         "sflow.warm_apart=true", "sflow.warm_take=0.7", "sflow.warm_margin=0.15"]  # fmt: skip
+         "sflow.warm_apart=true", "sflow.warm_take=0.7", "sflow.warm_margin=0.15",
+         "sflow.warm_start_group=0.7"]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -272,7 +273,8 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     # k >= 3 keeps off the spots of people 2..k - 1; results/umf-small-bandai-20261213: a
     # couple worded like a touching take is finished from one of its crops (the bank keeps
     # the touching takes whole); results/umf-small-bandai-20261214: a prompt worded like no
-    # caption (a group's) retrieves among the reactions of its nearest captions only
+    # caption (a group's) retrieves among the reactions of its nearest captions only, and
+    # person k >= 3 is sampled again from 0.7 on the path towards their proposal
     name = variant("name", work / "runs" / "gait" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]

@@ -168,6 +168,8 @@ def test_warm_start_out_of_range_is_refused(value):
     ("sflow.warm_side=true", "warm_side needs"),  # the tiny config has no shortlist
     ("sflow.warm_margin=0.15", "warm_margin needs"),
     ("sflow.warm_margin=1.5", "warm_margin"), ("sflow.warm_margin=-0.1", "warm_margin"),
+    ("sflow.warm_start_group=0.7", "warm_start_group needs"),  # tiny: no warm_start
+    ("sflow.warm_start_group=1.0", "warm_start_group"),
 ])  # fmt: skip
 def test_own_prompt_options_out_of_range_are_refused(option, match):
     from conftest import tiny_config
@@ -529,6 +531,33 @@ def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch
         cfg.warm_apart = False
     assert seen[2] is None and seen[3].shape == (1, 1, 2) and seen[4].shape == (1, 2, 2)
     assert torch.isfinite(seen[4]).all()
+    assert np.isfinite(scene.joints).all()
+
+
+def test_warm_start_group_is_person_3_onwards_time(models, monkeypatch):
+    """With ``sflow.warm_start_group`` the second pass of person k >= 3 starts at that time,
+    person 2's at ``warm_start`` (the S-Flow's own default); without it everybody's does."""
+    import umf.models.sflow
+
+    pipe = models["warm"]
+    seen = []
+    real = umf.models.sflow.SFlow.sample
+
+    def spy(self, prev, *args, warm=None, warm_t=None, **kwargs):
+        if warm is not None:
+            seen.append((prev.shape[1], warm_t))
+        return real(self, prev, *args, warm=warm, warm_t=warm_t, **kwargs)
+
+    monkeypatch.setattr(umf.models.sflow.SFlow, "sample", spy)
+    _scene(pipe, people=3)
+    assert seen == [(1, None), (2, None)]
+    cfg = pipe.config.sflow
+    try:
+        cfg.warm_start_group = 0.7
+        scene = _scene(pipe, people=4)
+    finally:
+        cfg.warm_start_group = 0.0
+    assert seen[2:] == [(1, None), (2, 0.7), (3, 0.7)]
     assert np.isfinite(scene.joints).all()
 
 

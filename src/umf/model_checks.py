@@ -46,7 +46,7 @@ _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats >
 # floats in [0, 1]
 _FRACTIONS = {"balance_labels", "caption_mix", "p_person_drop", "p_scene_drop",
               "foot_loss_min_t", "place_loss_max_t", "warm_start", "own_warm",
-              "warm_together", "warm_take", "warm_margin"}  # fmt: skip
+              "warm_together", "warm_take", "warm_margin", "warm_start_group"}  # fmt: skip
 
 
 def _check_value(where: str, kind: str, value: Any) -> None:
@@ -146,7 +146,10 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if sflow.warm_apart and sflow.warm_proposal != "retrieved":
             raise UMFError("sflow.warm_apart needs sflow.warm_proposal 'retrieved' (it "
                            "narrows the reactions retrieved)")  # fmt: skip
-        for name in ("warm_start", "own_warm", "warm_take"):
+        if sflow.warm_start_group and not sflow.warm_start:
+            raise UMFError("sflow.warm_start_group needs sflow.warm_start > 0 (it is person "
+                           "k >= 3's time for the same second pass)")  # fmt: skip
+        for name in ("warm_start", "own_warm", "warm_take", "warm_start_group"):
             if getattr(sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")
         for stage in ("train_vae", "train_pflow"):  # the losses on decoded people: S-Flow's

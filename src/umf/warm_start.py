@@ -37,6 +37,12 @@ retrieves, for a prompt that names a side ("... the second person on the first o
 left."), only reactions whose captions are at least as near the prompt as its mirror
 image: people on that side.
 
+``sflow.warm_start_group`` > 0 is person k >= 3's time for that second pass: their context
+holds two people or more, which the S-Flow never saw in training (groups are held out), and
+from 0.5 its second pass drifted back to where it would put a partner of person 1, often on
+someone's spot; from later on the path it keeps more of its proposal, which
+``sflow.warm_apart`` placed clear of them (results/umf-small-bandai-20261214).
+
 ``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
 that time towards the P-Flow's single-person motion for the own prompt alone
 (:func:`pflow_proposal`), whether the first pass glides or not. The S-Flow's own-prompt
@@ -526,7 +532,10 @@ def sample_added(
                     guess, turned = guess.clone(), turned.clone()
                     guess[rows[hit]] = pipe._encode(moved[hit]).to(guess)
                     turned[rows[hit]] = True
-        again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, **kw)
+        # person k >= 3: a context of 2+ people, which the S-Flow never trained on, pulls
+        # the second pass back to where a partner of person 1 stands (sflow.warm_start_group)
+        later = cfg.warm_start_group if prev.shape[1] > 1 and cfg.warm_start_group else None
+        again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, warm_t=later, **kw)
         nfe += m + n
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer | turned
         if others is not None:  # a first pass on someone's spot is sampled again, gliding or not
