@@ -212,7 +212,7 @@ class SFlowConfig:
     # > 0: after the usual pass, each added person is sampled again from this time on the
     # path towards a proposal (warm_proposal): the near-deterministic start glides
     warm_start: float = 0.0  # (umf.warm_start)
-    warm_start_group: float = 0.0  # > 0: person k >= 3's time instead (umf.warm_start)
+    warm_start_group: float = 0.0  # > 0: that time beside 2+ people (umf.warm_start)
     # what the warm start starts from: "pflow" (the P-Flow's motion: person 1's role) or
     # "retrieved" (one of the warm_neighbours real training reactions nearest to the first
     # pass: its role; the model directory's reactions.safetensors, umf.reaction_bank)

@@ -147,8 +147,8 @@ def check_config_values(config: Any, prefix: str = "") -> None:
             raise UMFError("sflow.warm_apart needs sflow.warm_proposal 'retrieved' (it "
                            "narrows the reactions retrieved)")  # fmt: skip
         if sflow.warm_start_group and not sflow.warm_start:
-            raise UMFError("sflow.warm_start_group needs sflow.warm_start > 0 (it is person "
-                           "k >= 3's time for the same second pass)")  # fmt: skip
+            raise UMFError("sflow.warm_start_group needs sflow.warm_start > 0 (it is the "
+                           "same second pass's time beside 2+ people)")  # fmt: skip
         for name in ("warm_start", "own_warm", "warm_take", "warm_start_group"):
             if getattr(sflow, name) >= 1.0:
                 raise UMFError(f"sflow.{name} must be below 1, got {getattr(sflow, name)}")

@@ -37,11 +37,12 @@ retrieves, for a prompt that names a side ("... the second person on the first o
 left."), only reactions whose captions are at least as near the prompt as its mirror
 image: people on that side.
 
-``sflow.warm_start_group`` > 0 is person k >= 3's time for that second pass: their context
-holds two people or more, which the S-Flow never saw in training (groups are held out), and
-from 0.5 its second pass drifted back to where it would put a partner of person 1, often on
-someone's spot; from later on the path it keeps more of its proposal, which
-``sflow.warm_apart`` placed clear of them (results/umf-small-bandai-20261214).
+``sflow.warm_start_group`` > 0 is that second pass's time for a person whose context holds
+two people or more (person k >= 3; in ``umf reroll``, anyone re-rolled beside two others),
+which the S-Flow never saw in training (groups are held out): from 0.5 its second pass
+drifted back to where it would put a partner of person 1, often on someone's spot; from
+later on the path it keeps more of its proposal, which ``sflow.warm_apart`` placed clear of
+them (results/umf-small-bandai-20261214).
 
 ``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
 that time towards the P-Flow's single-person motion for the own prompt alone
