@@ -559,6 +559,17 @@ def test_warm_start_group_is_person_3_onwards_time(models, monkeypatch):
         cfg.warm_start_group = 0.0
     assert seen[2:] == [(1, None), (2, 0.7), (3, 0.7)]
     assert np.isfinite(scene.joints).all()
+    # a re-roll: everybody else is the context, so person 2 of three gets the group's time,
+    # person 2 of two the usual one
+    three, two = _scene(pipe, people=3), _scene(pipe, people=2)
+    del seen[:]
+    try:
+        cfg.warm_start_group = 0.7
+        pipe.reroll(three, 2, seed=1)
+        pipe.reroll(two, 2, seed=1)
+    finally:
+        cfg.warm_start_group = 0.0
+    assert seen == [(2, 0.7), (1, None)]
 
 
 def test_warm_play_and_apart_need_what_they_narrow():
