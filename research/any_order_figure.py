@@ -16,6 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
+from umf.io import atomic_path
+
 
 def bars(groups: dict, model: str) -> tuple[list[str], dict[str, list[float]]]:
     """The relations of the groups and, per reading ("raw", "raw, any order", "delivered",
@@ -51,11 +53,9 @@ def draw(groups: dict, model: str, out: Path) -> None:
     ax.legend(fontsize=7, ncol=4, loc="upper center")
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp.png")  # no half-written picture
-    fig.savefig(tmp, dpi=120)
+    with atomic_path(out) as tmp:  # no half-written picture
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
-    tmp.replace(out)
 
 
 def main() -> None:

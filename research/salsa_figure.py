@@ -18,6 +18,8 @@ from pathlib import Path
 
 import numpy as np
 
+from umf.io import atomic_path
+
 PANELS = (("hands_near", "hands near (share of frames)"),
           ("penetration_cm", "bodies overlap, mean depth (cm)"))  # fmt: skip
 
@@ -51,11 +53,9 @@ def draw(rows: list[dict], real: list[dict], out: Path, chosen: float | None = N
     axes[0].legend(fontsize=7, loc="upper left")
     fig.suptitle('"Two people dance salsa together.", 4 s, delivered', fontsize=10)
     fig.tight_layout()
-    out.parent.mkdir(parents=True, exist_ok=True)
-    tmp = out.with_suffix(".tmp.png")  # no half-written picture
-    fig.savefig(tmp, dpi=120)
+    with atomic_path(out) as tmp:  # no half-written picture
+        fig.savefig(tmp, dpi=120, format="png")
     plt.close(fig)
-    tmp.replace(out)
 
 
 def main() -> None:

@@ -23,4 +23,4 @@ def test_bars_per_reading_and_a_picture(tmp_path):
     out = tmp_path / "groups.png"
     fig.draw(groups, "m", out)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert not list(tmp_path.glob("*.tmp.png"))
+    assert [p.name for p in tmp_path.iterdir()] == ["groups.png"]  # no temporary file left

@@ -20,4 +20,4 @@ def test_medians_per_value_and_a_picture(tmp_path):
     out = tmp_path / "salsa.png"
     fig.draw(rows, real, out, chosen=0.7)
     assert out.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
-    assert not list(tmp_path.glob("*.tmp.png"))
+    assert [p.name for p in tmp_path.iterdir()] == ["salsa.png"]  # no temporary file left
