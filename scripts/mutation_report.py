@@ -200,7 +200,7 @@ EQUIVALENT: dict[tuple[str, str], str] = {
         "up is only crossed with the body's across vector and the result normalised: twice "
         "as long gives the same unit vector (bar a body without hip or shoulder width)",
     # pipeline (session 29, a sample)
-    ("umf.pipeline.x_place_people", "if separate and decoded.shape[0] >= 1:"):
+    ("umf.clean_up.x_place_people", "if separate and decoded.shape[0] >= 1:"):  # was pipeline
         "one person has nobody to keep apart from: separate_people shifts nobody",
     # kinematics (session 27)
     ("umf.kinematics.x__lm_step",

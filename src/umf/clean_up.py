@@ -30,9 +30,10 @@ def clean_up(
        planted foot (:mod:`umf.anchoring`), with ``contact`` people 1 and 2 together by
        their mean;
     2. ``separate``: people 2..N shifted rigidly apart on the floor (:mod:`umf.separation`),
-       judged on the anchored paths; with ``contact`` (``{"closest_m", "pelvis_m"}``: the
-       prompt is worded like a real take whose people touch, from the model's vocabulary)
-       only as far as real partners ever keep apart, so partners may touch;
+       judged on the anchored paths; with ``contact`` (the prompt is worded like a real
+       take whose people touch, from the model's vocabulary; only its presence counts,
+       :func:`umf.separation.touching_distances`) only as far as real partners ever keep
+       apart, so partners may touch;
     3. ``fit``: one rigid body each, planted feet pinned and people with ``clean`` kept off
        the ``floor`` (:mod:`umf.kinematics`).
 

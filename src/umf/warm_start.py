@@ -525,7 +525,8 @@ def sample_added(
         turned = torch.zeros_like(answer)
         if others is not None:  # people not travelling with person 1 turn to a free bearing
             together = together_rows(pipe, decoded, leader)
-            rows = (~together if together is not None else ~turned).nonzero().flatten()
+            every = torch.ones_like(turned)
+            rows = (~together if together is not None else every).nonzero().flatten()
             if len(rows):
                 seen = pipe.decode(guess[rows], frames, reaction=True)
                 moved, hit = turned_free(seen, others[rows])

@@ -69,20 +69,29 @@ INTERCHANGEABLE = {"group_line": 0, "single_file": 0, "circle_greet": 0, "audien
 MAX_PERMUTED = 6  # people whose every order is tried (720); more are read as recorded
 
 
-def any_order_checks(record: dict[str, Any], joints: Any, fps: float = FPS) -> list[CheckResult]:
+def any_order_checks(
+    record: dict[str, Any],
+    joints: Any,
+    fps: float = FPS,
+    strict: Sequence[CheckResult] | None = None,
+) -> list[CheckResult]:
     """:func:`scene_checks` in the order of the people the caption leaves open
     (:data:`INTERCHANGEABLE`) that passes the most checks (the record's own order on a
     tie); people are renumbered back, so the results name the scene's people. A record of
     another relation, or with more than :data:`MAX_PERMUTED` such people (the protocol's
-    groups have at most 6), is read in order."""
+    groups have at most 6), is read in order. ``strict``: the results in the record's order,
+    where the caller has them already."""
     j = as_numpy(joints)
     first = INTERCHANGEABLE.get(record.get("relation", ""))
-    strict = scene_checks(record, j, fps)
+    strict = scene_checks(record, j, fps) if strict is None else list(strict)
     n = j.shape[0]
     if first is None or not 2 <= n - first <= MAX_PERMUTED or all(r.passed for r in strict):
         return strict
     constraints = [_at_fps(c, fps, j.shape[1]) for c in record["constraints"]]
     cache: dict[tuple[int, int, int], CheckResult] = {}
+    for i, (c, res) in enumerate(zip(constraints, strict, strict=True)):  # the recorded order
+        pair = "a" in c or "b" in c
+        cache[(i, c.get("a", 0), c.get("b", 1)) if pair else (i, -1, -1)] = res
 
     def result(i: int, c: dict[str, Any], order: tuple[int, ...]) -> CheckResult:
         if "a" not in c and "b" not in c:  # no_contact: the same in any order
@@ -171,7 +180,8 @@ def relation_accuracy(
     results = [scene_checks(r, j, fps) for r, j in zip(records, joints_list, strict=True)]
     out = accuracy_from_checks(records, results)
     if any(r.get("relation") in INTERCHANGEABLE for r in records):
-        loose = [any_order_checks(r, j, fps) for r, j in zip(records, joints_list, strict=True)]
+        loose = [any_order_checks(r, j, fps, res)
+                 for r, j, res in zip(records, joints_list, results, strict=True)]  # fmt: skip
         acc = accuracy_from_checks(records, loose)
         out["any_order"] = {k: acc[k] for k in ("scene_accuracy", "by_relation", "by_kind")}
     if reference is not None:

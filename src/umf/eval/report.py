@@ -29,6 +29,7 @@ from typing import Any
 import numpy as np
 import torch
 
+from umf.clean_up import delivered_joints
 from umf.data.clip import FPS
 from umf.data.corpus import Corpus
 from umf.eval import accumulation as A
@@ -54,7 +55,7 @@ from umf.eval.plan import (
 from umf.eval.protocol import ProtocolConfig, corpus_items, score_protocol
 from umf.eval.relations import real_scene_joints, relation_accuracy
 from umf.io import atomic_path, write_json_atomic, write_text_atomic
-from umf.pipeline import Scene, delivered_joints
+from umf.pipeline import Scene
 from umf.version import __version__
 
 

@@ -44,7 +44,7 @@ import torch
 
 from umf.flows.noise import Generators, randn
 from umf.flows.paths import TimeDistribution, interpolate, sample_time
-from umf.flows.solvers import Method, ODESolution, Velocity, integrate
+from umf.flows.solvers import Method, ODESolution, Velocity, integrate, remaining_steps
 
 Tensor = torch.Tensor
 Layout = Literal["1d", "2d"]
@@ -478,7 +478,7 @@ def sample_finest_from(
     eps = randn(proposal.shape, generator, device=proposal.device, dtype=proposal.dtype)
     x = finest_warm_state(proposal, eps, window, config.layout, t_local)
     stage = torch.full((x.shape[0],), window.stage, dtype=torch.long, device=x.device)
-    n = max(1, round(steps * (1.0 - t_local)))
+    n = remaining_steps(steps, t_local)
     return integrate(_local_field(velocity, window, stage, {}), x, steps=n, t0=t_local,
                      method=method)  # fmt: skip
 

@@ -32,7 +32,7 @@ from umf.flows.paths import (
     sample_time,
     target_velocity,
 )
-from umf.flows.solvers import Method, ODESolution, Velocity, integrate
+from umf.flows.solvers import Method, ODESolution, Velocity, integrate, remaining_steps
 
 Tensor = torch.Tensor
 
@@ -221,7 +221,7 @@ def sample_semi_noise(
     t0 = 0.0
     if warm is not None and warm_t > 0:
         x0, t0 = warm_state(x0, context, warm, warm_t, reaction_only=reaction_only), warm_t
-        steps = max(1, round(steps * (1.0 - t0)))
+        steps = remaining_steps(steps, t0)
     x1, nfe = integrate(velocity, x0, steps=steps, t0=t0, method=method, cond=cond)
     reaction = x1 if reaction_only else split_halves(x1)[1]
     return ODESolution(reaction, nfe)

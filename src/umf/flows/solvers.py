@@ -75,6 +75,12 @@ def batch_time(t: float, x: Tensor) -> Tensor:
     return torch.full((x.shape[0],), float(t), dtype=x.dtype, device=x.device)
 
 
+def remaining_steps(steps: int, t0: float) -> int:
+    """Steps left of a ``steps``-step schedule for a path entered at ``t0``: the warm starts
+    (P-Flow's finest stage, S-Flow's second pass) take the same step size as a full pass."""
+    return max(1, round(steps * (1.0 - t0)))
+
+
 def integrate(
     velocity: Velocity,
     x0: Tensor,
