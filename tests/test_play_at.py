@@ -7,9 +7,10 @@ import numpy as np
 import pytest
 import torch
 
+from umf.clearance import beyond, turned_free
 from umf.data import extension as E
 from umf.representation import assemble_features, features_to_joints, joints_to_rot6d
-from umf.warm_start import beyond, play_at, turned_free
+from umf.warm_start import play_at
 
 PERIOD = 24  # frames of the synthetic gait's cycle
 
@@ -105,7 +106,7 @@ def test_turned_free_turns_an_answer_about_person_1_to_a_free_bearing():
     from person 1; a row already clear stays."""
     import math
 
-    from umf.warm_start import AROUND
+    from umf.clearance import AROUND
 
     rows = torch.stack([_standing(0.0, 2.4), _standing(3.0, 3.0)])
     others = torch.tensor([[[0.05, 2.45]], [[0.05, 2.45]]])
@@ -126,7 +127,7 @@ def test_turned_free_turns_an_answer_about_person_1_to_a_free_bearing():
 def test_clear_of_moves_a_partner_sideways_until_no_joint_is_too_near():
     """A partner 0.3 m to the leader's left (or right) moves out until every joint is 0.4 m
     from the leader's, a little past; one already clear, or straight behind, stays."""
-    from umf.warm_start import PLAY_CLEAR, clear_of
+    from umf.clearance import PLAY_CLEAR, clear_of
 
     leader = torch.stack([_standing(0.0, 0.0)] * 4)
     rows = torch.stack([_standing(0.3, 0.0), _standing(-0.3, 0.0), _standing(1.0, 0.0),
@@ -139,7 +140,7 @@ def test_clear_of_moves_a_partner_sideways_until_no_joint_is_too_near():
     gap = features_to_joints(out[:2])[:, :, :, None] - features_to_joints(leader[:2])[:, :, None]
     assert float(gap.norm(dim=-1).min()) >= PLAY_CLEAR
     # never pushed to start farther out than PLAY_FARTHEST, clear or not
-    from umf.warm_start import PLAY_FARTHEST
+    from umf.clearance import PLAY_FARTHEST
 
     wide = clear_of(_standing(1.2, 0.0)[None], _standing(1.0, 0.0)[None])
     assert float(features_to_joints(wide[:, :1])[0, 0, 0, 0]) == pytest.approx(PLAY_FARTHEST)

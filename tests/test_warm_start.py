@@ -534,6 +534,42 @@ def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch
     assert np.isfinite(scene.joints).all()
 
 
+def test_warm_clear_gives_person_3_everybodys_bodies(models, monkeypatch):
+    """With ``sflow.warm_clear`` the proposal for person k >= 3 also gets the joints of
+    people 1..k - 1 (person 1's first, as :func:`umf.warm_start.sample_added` decodes them),
+    and the first pass is tested against them at that clearance (a touching one is sampled
+    again, fitting or not)."""
+    import umf.warm_start
+
+    pipe = models["warm"]
+    seen, taken = [], []
+    real = umf.warm_start.proposal
+
+    def spy(p, first, decoded, *args, bodies=None, **kwargs):
+        seen.append(None if bodies is None else bodies.clone())
+        return real(p, first, decoded, *args, bodies=bodies, **kwargs)
+
+    def always(features, bodies, clear):  # every first pass on someone: every row taken
+        taken.append(clear)
+        return torch.ones(len(features), dtype=torch.bool)
+
+    monkeypatch.setattr(umf.warm_start, "proposal", spy)
+    cfg = pipe.config.sflow
+    try:
+        cfg.warm_apart, cfg.warm_clear = True, 0.45
+        scene = _scene(pipe, people=4)
+        monkeypatch.setattr(umf.warm_start, "touches", always)
+        again = _scene(pipe, people=3)
+    finally:
+        cfg.warm_apart, cfg.warm_clear = False, 0.0
+    assert seen[0] is None  # person 2: nobody to keep off but person 1, a partner
+    assert seen[1].shape[:2] == (1, 2) and seen[2].shape[:2] == (1, 3)
+    assert seen[2].shape[-2:] == (22, 3) and torch.isfinite(seen[2]).all()
+    torch.testing.assert_close(seen[1], seen[2][:, :2])  # the same people 1 and 2
+    assert np.isfinite(scene.joints).all() and np.isfinite(again.joints).all()
+    assert taken == [0.45]  # person 3 of three: the first pass tested once, at warm_clear
+
+
 def test_warm_start_group_is_person_3_onwards_time(models, monkeypatch):
     """With ``sflow.warm_start_group`` the second pass of person k >= 3 starts at that time,
     person 2's at ``warm_start`` (the S-Flow's own default); without it everybody's does."""
@@ -581,3 +617,7 @@ def test_warm_play_and_apart_need_what_they_narrow():
         check_config_values(set_option(tiny_config(), "sflow.warm_play=true"))
     with pytest.raises(UMFError, match="warm_apart needs"):
         check_config_values(set_option(tiny_config(), "sflow.warm_apart=true"))
+    with pytest.raises(UMFError, match="warm_clear needs"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_clear=0.45"))
+    with pytest.raises(UMFError, match="warm_clear"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_clear=-0.1"))

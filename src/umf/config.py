@@ -53,8 +53,7 @@ class VAEConfig:
     # absolute path jitters by centimetres every frame and drifts slowly (real wavers
     # reconstructed by the bundled VAE travel 0.125 m/s net at 0.005, 0.072 at 0.0002, real
     # 0.002; walks 1.16 and 1.27 m/s, real 1.26: research/vae_root_drift.py). Chosen on the
-    # val split (results/umf-small-bandai-20261127): single-person FID 19.0 -> 10.3,
-    # two-person 34.2 -> 24.9
+    # val split (results/umf-small-bandai-20261127): FID 19.0 -> 10.3, pairs 34.2 -> 24.9
     root_fusion: float = 0.0002
     # the pelvis's height; None = root_fusion. The decoded height is reliable and its
     # velocity integrated over seconds is not (at 0.0002 feet sank 1.1 cm into the floor)
@@ -218,8 +217,7 @@ class SFlowConfig:
     # pass: its role; the model directory's reactions.safetensors, umf.reaction_bank)
     warm_proposal: str = "pflow"
     warm_neighbours: int = 4
-    # > 0: the second pass only for people whose first pass glides (umf.warm_start.glide_score
-    # above this), the others' first pass kept
+    # > 0: only people whose first pass glides (warm_start.glide_score above this) pass again
     warm_glide: float = 0.0
     # > 0: retrieve among the reactions whose pelvis velocity (person 1's frame) is within
     # this fraction of the first pass's (its path keeps pace and direction where its legs
@@ -233,16 +231,18 @@ class SFlowConfig:
     # with warm_together: the reaction retrieved for a row travelling with person 1 is played
     # at person 1's pace (umf.data.extension.played_at: resampled in time, its gait carried
     # on) and taken whatever its own pace, moved sideways to keep its joints 0.4 m from the
-    # leader's, at most 1.3 m out (umf.warm_start.clear_of): the bank's real partners are
+    # leader's, at most 1.3 m out (umf.clearance.clear_of): the bank's real partners are
     # slower than the P-Flow's runners, and within warm_pace a partner 15 % slow still fits
     warm_play: bool = False
     # person k >= 3 keeps off where people 2..k - 1 start (umf.reaction_bank.SPOT): one
     # travelling with person 1 is moved beyond the one whose spot it lands on (a row, a
-    # single file: umf.warm_start.beyond), anyone else retrieved away from them and turned
+    # single file: umf.clearance.beyond), anyone else retrieved away from them and turned
     # about person 1 to a free bearing (an audience: turned_free); the S-Flow, trained on
     # pairs, puts every added person where it would put a partner of person 1
-    # (results/reactions-20261208)
+    # (results/reactions-20261208); warm_clear > 0: also off their bodies, every joint, every
+    # frame (m; umf.clearance.touches)
     warm_apart: bool = False
+    warm_clear: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
     # as near it as its mirror image (side words swapped): people on the side it names

@@ -37,7 +37,8 @@ _UNBOUNDED = {"max_steps", "warmup_steps", "val_every", "ckpt_every", "log_every
 
 _NON_NEGATIVE = {"reaction_noise", "context_noise", "w_root_vel", "position_fusion",
                  "guidance", "fine_guidance", "person_guidance", "foot_loss", "place_loss",
-                 "joint_loss", "warm_glide", "warm_pace", "warm_timing"}  # fmt: skip  # >= 0
+                 "joint_loss", "warm_glide", "warm_pace", "warm_timing",
+                 "warm_clear"}  # fmt: skip  # >= 0
 
 
 _POSITIVE = {"root_fusion", "height_fusion", "reaction_root_fusion"}  # floats > 0
@@ -146,6 +147,9 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if sflow.warm_apart and sflow.warm_proposal != "retrieved":
             raise UMFError("sflow.warm_apart needs sflow.warm_proposal 'retrieved' (it "
                            "narrows the reactions retrieved)")  # fmt: skip
+        if sflow.warm_clear and not sflow.warm_apart:
+            raise UMFError("sflow.warm_clear needs sflow.warm_apart (it keeps the same people "
+                           "apart, over their whole bodies)")  # fmt: skip
         if sflow.warm_start_group and not sflow.warm_start:
             raise UMFError("sflow.warm_start_group needs sflow.warm_start > 0 (it is the "
                            "same second pass's time beside 2+ people)")  # fmt: skip

@@ -58,17 +58,17 @@ scene.
 
 from __future__ import annotations
 
-import math
 from typing import Any
 
 import torch
 
+from umf.clearance import beyond, clear_of, crowded, touches, turned_free
 from umf.config import MULTI_PERSON, SINGLE_PERSON
 from umf.data.extension import played_at
 from umf.data.relations import ONSET_SMOOTHING, SIDE_MARGIN, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
-from umf.reaction_bank import REACTIONS, SPOT
+from umf.reaction_bank import REACTIONS
 from umf.representation import (
     assemble_features,
     features_to_joints,
@@ -77,7 +77,6 @@ from umf.representation import (
     hold_to_length,
     joints_to_rot6d,
     leader_frame,
-    place_features,
     shift_in_time,
     transform_features,
 )
@@ -150,89 +149,6 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
     return torch.stack(out).to(features.device)
 
 
-# m a partner played at the leader's pace keeps between any of its joints and the leader's:
-# level partners touched where the slower real one had passed (the checks count 0.25 m as
-# contact, and the second pass drifts a little from its proposal)
-PLAY_CLEAR = 0.4
-# m from person 1 a partner moved clear of them may start at most: real partners side by side
-# start 0.7-1.1 m out, and a runner pushed clear of a leader's swinging arms started beyond
-# the 1.6 m a pair walking together is checked for
-PLAY_FARTHEST = 1.3
-
-
-def clear_of(features: Tensor, leader: Tensor, distance: float = PLAY_CLEAR) -> Tensor:
-    """``features`` (B, T, 262) moved sideways (along person 1's x, away from them: the side
-    each starts on) until no joint comes within ``distance`` of one of ``leader``'s (B, T,
-    262) at any frame, but never to start more than :data:`PLAY_FARTHEST` to the side; a row
-    starting straight ahead or behind stays."""
-    for _ in range(3):  # a shift can bring another frame's arm into play
-        a, b = features_to_joints(features), features_to_joints(leader)
-        gap = (a[:, :, :, None] - b[:, :, None]).norm(dim=-1).flatten(1).min(dim=1).values
-        x = floor_start(features)[:, 0]
-        need = (distance - gap).clamp_min(0.0) * (x != 0)
-        if not bool((need > 1e-4).any()):
-            break
-        # a little past, for the next frame's arm, but no farther out than PLAY_FARTHEST
-        room = (PLAY_FARTHEST - x.abs()).clamp_min(0.0)
-        dx = torch.sign(x) * torch.minimum((need + 0.02) * (need > 1e-4), room)
-        features = place_features(features, 0.0, dx, torch.zeros_like(dx))
-    return features
-
-
-def beyond(features: Tensor, others: Tensor) -> Tensor:
-    """``features`` (B, T, 262) of people travelling with person 1 moved on the floor, where
-    a row starts within ``SPOT`` of one of ``others`` (B, M, 2: where people 2..k - 1
-    start, person 1's frame; NaN: nobody), by that person's own start, and by as much again
-    while it lands on someone. Person 3 of a row walking side by side walks on person 2's far
-    side, of a single file behind person 2: each does to the one before what person 2 does
-    to person 1."""
-    gap = torch.nan_to_num(torch.cdist(floor_start(features)[:, None], others)[:, 0],
-                           nan=float("inf"))  # (B, M)  # fmt: skip
-    near = gap.argmin(dim=1)
-    hit = gap.gather(1, near[:, None])[:, 0] < SPOT
-    step = others[torch.arange(len(others), device=others.device), near]  # (B, 2)
-    step = torch.where(hit[:, None], step, torch.zeros_like(step))
-    for _ in range(others.shape[1]):
-        if not bool(hit.any()):
-            break
-        features = place_features(features, 0.0, step[:, 0] * hit, step[:, 1] * hit)
-        hit = hit & crowded(features, others)
-    return features
-
-
-def crowded(features: Tensor, others: Tensor, spot: float = SPOT) -> Tensor:
-    """(B,) whether each row of ``features`` (B, T, 262) starts within ``spot`` of one of
-    ``others`` (B, M, 2): where people 2..k - 1 start (a NaN point, nobody, is never near)."""
-    return (torch.cdist(floor_start(features)[:, None], others)[:, 0] < spot).any(dim=-1)
-
-
-# m a person turned about person 1 to a free bearing keeps from where anyone before starts:
-# an audience's members stand 0.9-1.2 m apart (umf.data.scene_relations); at SPOT they bowed
-# into each other (results/umf-small-bandai-20261212)
-AROUND = 1.2
-# turns about person 1 tried, nearest first, for a proposal standing on someone's spot
-BEARINGS = tuple(math.radians(sign * deg) for deg in range(20, 181, 20) for sign in (1, -1))
-
-
-def turned_free(features: Tensor, others: Tensor,
-                clear: float = AROUND) -> tuple[Tensor, Tensor]:  # fmt: skip
-    """``features`` (B, T, 262), the rows among them that start within ``SPOT`` of one of
-    ``others`` (B, M, 2) turned about person 1's first-frame pelvis (the origin) by the
-    smallest of :data:`BEARINGS` that puts their start at least ``clear`` from all of them,
-    and (B,) which were turned. A reaction that faces person 1 (an answer, an audience
-    member, someone walking over) still faces them from its new bearing; the bank holds pairs
-    only, so the third member of an audience had no real reaction standing beside the second
-    one to take."""
-    out, turned = features.clone(), torch.zeros(len(features), dtype=torch.bool)
-    for i in crowded(features, others).nonzero().flatten().tolist():
-        for yaw in BEARINGS:
-            moved = place_features(features[i], yaw, 0.0, 0.0)
-            if not bool(crowded(moved[None], others[i : i + 1], clear)[0]):
-                out[i], turned[i] = moved, True
-                break
-    return out, turned.to(features.device)
-
-
 def start_side(features: Tensor) -> Tensor:
     """(B,) +1 where a person 2..N (features (B, T, 262), person 1's frame) starts more than
     ``SIDE_MARGIN`` to person 1's left (+x), -1 to the right, 0 in between."""
@@ -264,6 +180,7 @@ def proposal(
     answers_first: bool = True,
     leader: Tensor | None = None,
     others: Tensor | None = None,
+    bodies: Tensor | None = None,
 ) -> tuple[Tensor, int, Tensor, tuple[Tensor, list[int]] | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
@@ -278,7 +195,8 @@ def proposal(
     person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
     their first pass's side (played at it with ``sflow.warm_play``); ``others`` (B, M, 2):
     where people 2..k - 1 start (``sflow.warm_apart``), whose spots and sides the row's
-    reaction keeps off."""
+    reaction keeps off; ``bodies`` (B, M, T, 22, 3): their joints, with ``sflow.warm_clear``
+    (:func:`beyond`)."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -325,8 +243,9 @@ def proposal(
                 reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
                 reaction = clear_of(reaction, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
-            if others is not None:  # on someone's spot: beyond them
-                moved = beyond(reaction, others[rows])
+            if others is not None:  # on someone's spot (or body): beyond them
+                moved = beyond(reaction, others[rows], None if bodies is None else bodies[rows],
+                               cfg.warm_clear)  # fmt: skip
                 changed = changed | (moved != reaction).any(dim=2).any(dim=1)
                 reaction = moved
             if bool(changed.any()):
@@ -513,14 +432,21 @@ def sample_added(
         leader = (pipe.decode(prev[:, 0], frames, reaction=not answers_first)
                   if cfg.warm_together > 0 else None)  # fmt: skip
         others = None  # where people 2..k - 1 start, for person k >= 3 (sflow.warm_apart)
+        bodies = None  # and everybody's joints, person 1's too, with sflow.warm_clear
         if cfg.warm_apart and prev.shape[1] > 1:
             b, n = prev.shape[:2]
             there = pipe.decode(prev[:, 1:].flatten(0, 1), frames, reaction=True)
             others = floor_start(there).reshape(b, n - 1, 2)
+            if cfg.warm_clear > 0:
+                first = leader if leader is not None else pipe.decode(
+                    prev[:, 0], frames, reaction=not answers_first)  # fmt: skip
+                bodies = torch.cat([features_to_joints(first)[:, None],
+                                    features_to_joints(there).reshape(b, n - 1, frames, 22, 3)],
+                                   dim=1)  # fmt: skip
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
                                        answers_first=answers_first, leader=leader,
-                                       others=others)  # fmt: skip
+                                       others=others, bodies=bodies)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         turned = torch.zeros_like(answer)
         if others is not None:  # people not travelling with person 1 turn to a free bearing
@@ -529,7 +455,8 @@ def sample_added(
             rows = (~together if together is not None else every).nonzero().flatten()
             if len(rows):
                 seen = pipe.decode(guess[rows], frames, reaction=True)
-                moved, hit = turned_free(seen, others[rows])
+                moved, hit = turned_free(seen, others[rows], bodies=None if bodies is None
+                                         else bodies[rows], body_clear=cfg.warm_clear)  # fmt: skip
                 if bool(hit.any()):
                     guess, turned = guess.clone(), turned.clone()
                     guess[rows[hit]] = pipe._encode(moved[hit]).to(guess)
@@ -542,5 +469,7 @@ def sample_added(
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer | turned
         if others is not None:  # a first pass on someone's spot is sampled again, gliding or not
             take = take | (fits & crowded(decoded, others))
+        if bodies is not None:  # a first pass on someone's body at any frame, fitting or not
+            take = take | touches(decoded, bodies, cfg.warm_clear)
         w = torch.where(take[:, None, None], again, w)
     return w, nfe

@@ -1,0 +1,116 @@
+"""Keeping person k >= 3 off everybody's whole body (``sflow.warm_clear``): the contact test
+against brute force, and the moves of :func:`beyond` and :func:`turned_free` that use it."""
+
+from __future__ import annotations
+
+import math
+
+import pytest
+import torch
+
+from umf.clearance import AROUND, beyond, crowded, touches, turned_free
+from umf.representation import assemble_features, features_to_joints
+
+pytestmark = pytest.mark.usefixtures("one_thread")
+
+
+def _moving(x0: float, z0: float, x1: float, z1: float, frames: int = 20) -> torch.Tensor:
+    """Features (frames, 262) of a body whose pelvis goes from (x0, z0) to (x1, z1) on the
+    floor in a straight line: every joint above the pelvis, a little ahead of it."""
+    t = torch.linspace(0.0, 1.0, frames + 1)[:, None]
+    joints = torch.zeros(frames + 1, 22, 3)
+    joints[..., 1] = torch.linspace(0.0, 1.6, 22)
+    joints[..., 0] += x0 + (x1 - x0) * t
+    joints[..., 2] += z0 + (z1 - z0) * t + torch.linspace(0.0, 0.3, 22)
+    return assemble_features(joints, torch.zeros(frames + 1, 21, 6))
+
+
+def _bodies(*people: torch.Tensor) -> torch.Tensor:
+    """(1, M, T, 22, 3) joints of people as :func:`touches` reads them."""
+    return features_to_joints(torch.stack(people))[None]
+
+
+def test_touches_is_the_closest_joints_over_every_frame():
+    """Against brute force on random bodies; a start far apart does not hide a later
+    meeting; NaN (nobody) never touches."""
+    gen = torch.Generator().manual_seed(0)
+    rows = torch.stack([_moving(0, 0, 0, 0), _moving(1.5, 0, 0.1, 0), _moving(1.5, 0, 1.5, 0)])
+    other = _moving(0.0, 0.0, 0.0, 0.0) + 0.0
+    bodies = _bodies(other).expand(3, -1, -1, -1, -1)
+    # row 0 stands on them, row 1 starts 1.5 m away and walks into them, row 2 stays away
+    assert touches(rows, bodies, 0.25).tolist() == [True, True, False]
+    assert not bool(crowded(rows[1:2], torch.tensor([[[0.0, 0.0]]]))[0])  # the start rule misses it
+    nobody = torch.full_like(bodies, float("nan"))
+    assert not touches(rows, nobody, 0.25).any()
+    # brute force: the smallest joint distance at the same frame, over every frame
+    noisy = rows + 0.05 * torch.randn(rows.shape, generator=gen) * (torch.arange(262) < 66)
+    a, b = features_to_joints(noisy), bodies[:, 0]
+    gap = (a[:, :, :, None] - b[:, :, None]).norm(dim=-1).flatten(1).amin(dim=1)
+    for clear in (0.2, float(gap[1]) + 1e-4, float(gap[1]) - 1e-4, 1.0):
+        assert touches(noisy, bodies, clear).tolist() == (gap < clear).tolist()
+
+
+def test_beyond_moves_a_walker_off_a_body_it_meets_later():
+    """Person 3 starts 1.0 m past person 2 (beyond the start rule's ``SPOT``) and drifts
+    onto them: with the bodies it is moved by person 2's start until it touches nobody;
+    without, it stays where it was."""
+    person2 = _moving(0.9, 0.0, 0.9, 2.0)
+    row = _moving(1.9, 0.0, 1.0, 2.0)[None]
+    others = torch.tensor([[[0.9, 0.0]]])
+    bodies = _bodies(person2)
+    torch.testing.assert_close(beyond(row, others), row)  # the start rule alone: stays
+    moved = beyond(row, others, bodies, 0.45)
+    assert not bool(touches(moved, bodies, 0.45)[0])
+    start = features_to_joints(moved[:, :1])[0, 0, 0, [0, 2]]
+    torch.testing.assert_close(start, torch.tensor([2.8, 0.0]), atol=1e-5, rtol=0)
+    torch.testing.assert_close(moved[:, :, 66:], row[:, :, 66:])  # only moved on the floor
+    # a walker touching nobody is left alone
+    torch.testing.assert_close(beyond(row, others, bodies, 0.05), row)
+
+
+def test_beyond_steps_outwards_where_steps_by_a_start_do_not_clear():
+    """A walker still touching after stepping past everybody goes on outwards in 0.25 m
+    steps (at most four): here person 2 stands wide, so one start-sized step lands on them
+    again."""
+    person2 = _moving(0.5, 0.0, 0.5, 0.0)
+    wide = _moving(1.0, 0.0, 1.0, 0.0)  # person 3 of four already stands at 1.0
+    row = _moving(0.2, 0.0, 0.2, 0.0)[None]  # on person 2's spot
+    others = torch.tensor([[[0.5, 0.0], [1.0, 0.0]]])
+    bodies = _bodies(person2, wide)
+    moved = beyond(row, others, bodies, 0.3)
+    assert not bool(touches(moved, bodies, 0.3)[0])
+    x = float(features_to_joints(moved[:, :1])[0, 0, 0, 0])
+    assert x > 1.0 + 0.3  # past the outermost, on the same side
+
+
+def test_turned_free_turns_a_row_that_touches_only_later():
+    """A row starting 2.4 m in front of person 1, well off person 2's start, whose body
+    walks onto person 2's later: turned about the origin to the smallest bearing that keeps
+    its whole motion ``body_clear`` away; without bodies it stays."""
+    person2 = _moving(0.05, 1.0, 0.05, 1.0)
+    row = _moving(0.0, 2.4, 0.0, 1.0)[None]  # walks towards person 1, through person 2
+    others = torch.tensor([[[0.05, 1.0]]])
+    bodies = _bodies(person2)
+    same, turned = turned_free(row, others)
+    assert not bool(turned[0])
+    torch.testing.assert_close(same, row)
+    out, turned = turned_free(row, others, bodies=bodies, body_clear=0.45)
+    assert bool(turned[0]) and not bool(touches(out, bodies, 0.45)[0])
+    start = features_to_joints(out[:, :1])[0, 0, 0, [0, 2]]
+    assert float(start.norm()) == pytest.approx(2.4, abs=1e-4)  # as far from person 1
+    assert float((start - others[0, 0]).norm()) >= AROUND
+    bearing = abs(math.degrees(math.atan2(float(start[0]), float(start[1]))))
+    assert 20.0 - 1e-3 <= bearing < 180.0
+
+
+def test_turned_free_falls_back_to_the_start_rule_where_no_bearing_clears():
+    """Person 1's body in the list stands where every bearing passes (the row walks to
+    the origin): the smallest bearing the start rule allows is taken, as without bodies."""
+    leader = _moving(0.0, 0.0, 0.0, 0.0)
+    row = _moving(0.0, 2.4, 0.0, 0.1)[None]
+    others = torch.tensor([[[0.05, 2.45]]])
+    bodies = _bodies(leader)
+    rule, _ = turned_free(row, others)
+    out, turned = turned_free(row, others, bodies=bodies, body_clear=0.45)
+    assert bool(turned[0])
+    torch.testing.assert_close(out, rule)
