@@ -105,7 +105,8 @@ def test_turned_free_turns_a_row_that_touches_only_later():
 
 def test_turned_free_falls_back_to_the_start_rule_where_no_bearing_clears():
     """Person 1's body in the list stands where every bearing passes (the row walks to
-    the origin): the smallest bearing the start rule allows is taken, as without bodies."""
+    the origin): a row on someone's spot takes the smallest bearing the start rule allows,
+    as without bodies; a row on nobody's spot stays."""
     leader = _moving(0.0, 0.0, 0.0, 0.0)
     row = _moving(0.0, 2.4, 0.0, 0.1)[None]
     others = torch.tensor([[[0.05, 2.45]]])
@@ -114,3 +115,8 @@ def test_turned_free_falls_back_to_the_start_rule_where_no_bearing_clears():
     out, turned = turned_free(row, others, bodies=bodies, body_clear=0.45)
     assert bool(turned[0])
     torch.testing.assert_close(out, rule)
+    # off everybody's spot, on person 1's body only: no turn helps, so it stays
+    away = torch.tensor([[[3.0, -3.0]]])
+    out, turned = turned_free(row, away, bodies=bodies, body_clear=0.45)
+    assert not bool(turned[0])
+    torch.testing.assert_close(out, row)

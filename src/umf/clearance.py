@@ -135,12 +135,12 @@ def turned_free(
     only, so the third member of an audience had no real reaction standing beside the second
     one to take. With ``bodies`` (B, M, T, 22, 3) and ``body_clear`` > 0
     (``sflow.warm_clear``), a row that :func:`touches` one of them is turned too, to the
-    smallest bearing that also keeps every joint ``body_clear`` from theirs throughout (the
-    start rule alone where no bearing does)."""
+    smallest bearing that also keeps every joint ``body_clear`` from theirs throughout; where
+    no bearing does, a row on someone's spot takes the start rule's and any other stays (a
+    turn about person 1 cannot take anyone off person 1's body)."""
     whole = bodies is not None and body_clear > 0
-    hit = crowded(features, others)
-    if whole:
-        hit = hit | touches(features, bodies, body_clear)
+    spot = crowded(features, others)
+    hit = spot | touches(features, bodies, body_clear) if whole else spot
     out, turned = features.clone(), torch.zeros(len(features), dtype=torch.bool)
     for i in hit.nonzero().flatten().tolist():
         fallback = None
@@ -153,6 +153,6 @@ def turned_free(
                 out[i], turned[i] = moved, True
                 break
             fallback = moved if fallback is None else fallback
-        if fallback is not None:
+        if fallback is not None and bool(spot[i]):  # off someone's spot, as without bodies
             out[i], turned[i] = fallback, True
     return out, turned.to(features.device)

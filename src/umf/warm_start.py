@@ -451,8 +451,11 @@ def sample_added(
         turned = torch.zeros_like(answer)
         if others is not None:  # people not travelling with person 1 turn to a free bearing
             together = together_rows(pipe, decoded, leader)
-            every = torch.ones_like(turned)
-            rows = (~together if together is not None else every).nonzero().flatten()
+            free = ~together if together is not None else torch.ones_like(turned)
+            if bodies is not None:  # on someone's body, no real reaction at its pace: itself
+                itself = free & ~fits & ~answer & touches(decoded, bodies, cfg.warm_clear)
+                guess = torch.where(itself[:, None, None], w, guess)
+            rows = free.nonzero().flatten()
             if len(rows):
                 seen = pipe.decode(guess[rows], frames, reaction=True)
                 moved, hit = turned_free(seen, others[rows], bodies=None if bodies is None
