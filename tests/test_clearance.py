@@ -50,22 +50,27 @@ def test_touches_is_the_closest_joints_over_every_frame():
         assert touches(noisy, bodies, clear).tolist() == (gap < clear).tolist()
 
 
-def test_beyond_moves_a_walker_off_a_body_it_meets_later():
-    """Person 3 starts 1.0 m past person 2 (beyond the start rule's ``SPOT``) and drifts
-    onto them: with the bodies it is moved by person 2's start until it touches nobody;
-    without, it stays where it was."""
-    person2 = _moving(0.9, 0.0, 0.9, 2.0)
-    row = _moving(1.9, 0.0, 1.0, 2.0)[None]
-    others = torch.tensor([[[0.9, 0.0]]])
+def test_beyond_moves_a_file_walker_off_a_body_it_meets_later():
+    """Person 3 of a single file starts 0.9 m behind person 2 (beyond the start rule's
+    ``SPOT``) and catches up with them: with the bodies it is moved back by person 2's
+    start until it touches nobody; without, it stays. A walker beside person 2 who drifts
+    onto them (a row) is not moved by touching alone."""
+    person2 = _moving(0.0, -1.2, 0.0, 0.8)
+    row = _moving(0.1, -2.1, 0.1, 0.6)[None]  # faster: ends 0.2 m behind person 2
+    others = torch.tensor([[[0.0, -1.2]]])
     bodies = _bodies(person2)
     torch.testing.assert_close(beyond(row, others), row)  # the start rule alone: stays
     moved = beyond(row, others, bodies, 0.45)
     assert not bool(touches(moved, bodies, 0.45)[0])
     start = features_to_joints(moved[:, :1])[0, 0, 0, [0, 2]]
-    torch.testing.assert_close(start, torch.tensor([2.8, 0.0]), atol=1e-5, rtol=0)
+    torch.testing.assert_close(start, torch.tensor([0.1, -3.3]), atol=1e-5, rtol=0)
     torch.testing.assert_close(moved[:, :, 66:], row[:, :, 66:])  # only moved on the floor
-    # a walker touching nobody is left alone
-    torch.testing.assert_close(beyond(row, others, bodies, 0.05), row)
+    torch.testing.assert_close(beyond(row, others, bodies, 0.05), row)  # touching nobody
+    beside = _moving(0.9, 0.0, 0.9, 2.0)
+    drifting = _moving(1.9, 0.0, 1.0, 2.0)[None]
+    assert bool(touches(drifting, _bodies(beside), 0.45)[0])
+    same = beyond(drifting, torch.tensor([[[0.9, 0.0]]]), _bodies(beside), 0.45)
+    torch.testing.assert_close(same, drifting)
 
 
 def test_beyond_steps_outwards_where_steps_by_a_start_do_not_clear():
