@@ -248,6 +248,27 @@ def test_people_3_to_n_start_off_the_spots_of_those_before_them(pipe):
         assert min(gaps) >= 0.5 and float(np.median(gaps)) >= 0.8, (prompt, gaps)
 
 
+def test_groups_keep_off_each_others_bodies_raw(pipe):
+    """Raw (no separation), seeds 0-3, a circle of five, a gathering of five and a single
+    file of four: no two people's joints come within 0.25 m (the ``no_contact`` check) in at
+    least 10 of the 12 scenes, and in at least 2 of the 4 gatherings. 20261214 kept 7 and 0:
+    its walkers met at the caller; 20261215's ``sflow.warm_clear`` keeps 10 and 4
+    (results/umf-small-bandai-20261215)."""
+    from umf.data.relations import CONTACT_DISTANCE, min_interperson_distance
+
+    apart = {}
+    for prompt, n in (("Five people stand in a circle and bow.", 5),
+                      ("A person calls and four people walk over to them.", 5),
+                      ("Four people walk in single file.", 4)):  # fmt: skip
+        for seed in range(4):
+            (scene,) = pipe(prompt, num_people=n, seconds=4.0, seed=seed, fit=False,
+                            separate=False)  # fmt: skip
+            gap = min_interperson_distance(np.asarray(scene.joints))[0]
+            apart[prompt, seed] = gap >= CONTACT_DISTANCE
+    gathered = [apart[k] for k in apart if k[0].startswith("A person calls")]
+    assert sum(apart.values()) >= 10 and sum(gathered) >= 2, apart
+
+
 def test_a_single_file_of_three_walks_in_file(pipe):
     """ "Three people walk in single file.", 4 s, seeds 0-7, delivered: at the end each
     person stands at least 1 m behind the one before along person 1's heading in at least 6
