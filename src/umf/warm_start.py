@@ -42,7 +42,10 @@ two people or more (person k >= 3; in ``umf reroll``, anyone re-rolled beside tw
 which the S-Flow never saw in training (groups are held out): from 0.5 its second pass
 drifted back to where it would put a partner of person 1, often on someone's spot; from
 later on the path it keeps more of its proposal, which ``sflow.warm_apart`` placed clear of
-them (results/umf-small-bandai-20261214).
+them (results/umf-small-bandai-20261214). ``sflow.warm_clear`` c > 0 keeps them off
+everybody's whole body, every joint c away at every frame (:mod:`umf.clearance`): a first
+pass that touches someone is sampled again, from itself moved where no real reaction at its
+pace was found (results/umf-small-bandai-20261215).
 
 ``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
 that time towards the P-Flow's single-person motion for the own prompt alone
