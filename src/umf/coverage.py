@@ -136,19 +136,20 @@ def build_vocabulary(
 
 
 def take_contacts(clips) -> dict[str, dict[str, float]]:
-    """For each caption of a real multi-person take whose people touch (hands near in at
-    least a quarter of its frames, :func:`umf.data.relations.pair_closeness`), how close its
-    people come: the smallest over those takes of the 5th-percentile closest-joints and
-    pelvis distances. What the data holds close, the clean-up lets stay close."""
-    from umf.data.relations import pair_closeness
+    """For each caption of a real multi-person take whose people touch
+    (:func:`umf.data.relations.measured_relation`), how close its people come: the smallest
+    over those takes of the 5th-percentile closest-joints and pelvis distances. What the
+    data holds close, the clean-up lets stay close."""
+    from umf.data.relations import measured_relation
 
     out: dict[str, dict[str, float]] = {}
     for c in clips:
         if c.num_people < 2:
             continue
-        pairs = [pair_closeness(c.joints, 0, k) for k in range(1, c.num_people)]
-        if not any(p["hands_near"] >= 0.25 for p in pairs):
+        measured = measured_relation(c.joints)
+        if not measured["touching"]:
             continue
+        pairs = list(measured["pairs"].values())
         near = {"closest_m": min(p["closest_p05_m"] for p in pairs),
                 "pelvis_m": min(p["pelvis_p05_m"] for p in pairs)}  # fmt: skip
         for caption in c.captions:

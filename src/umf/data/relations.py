@@ -244,10 +244,16 @@ def pair_closeness(joints: np.ndarray, a: int = 0, b: int = 1) -> dict[str, floa
     }
 
 
+# share of a take's frames with hands near (pair_closeness) from which its people touch
+TOUCHING_HANDS = 0.25
+
+
 def measured_relation(joints: np.ndarray) -> dict[str, Any]:
     """The relation record of a real take, measured on its motion: person 1 against each
-    other person (:func:`pair_closeness`), and whether they touch (hands near in at least a
-    quarter of the frames), so the clean-up and the checks can keep such people close."""
+    other person (:func:`pair_closeness`), and whether they touch (hands near in at least
+    :data:`TOUCHING_HANDS` of the frames, for person 1 and someone), so the clean-up and the
+    checks can keep such people close. The one rule for "a take whose people touch": the
+    importer's record, the vocabulary's ``contact`` and the bank's touching crops read it."""
     pairs = {f"1-{k + 1}": pair_closeness(joints, 0, k) for k in range(1, joints.shape[0])}
-    touch = any(p["hands_near"] >= 0.25 for p in pairs.values())
+    touch = any(p["hands_near"] >= TOUCHING_HANDS for p in pairs.values())
     return {"kind": "real-take", "pairs": pairs, "touching": bool(touch)}

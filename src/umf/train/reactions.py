@@ -124,8 +124,8 @@ def build_reaction_bank(
 def touching_crops(
     ds: SceneDataset, frames: int
 ) -> tuple[list[torch.Tensor], list[list[str]], list[tuple[str, int]]]:
-    """People 1 and 2 of each real take the dataset serves whose people touch (hands near in
-    at least a quarter of the frames, :func:`umf.data.relations.measured_relation`), cropped
+    """People 1 and 2 of each real take the dataset serves who touch
+    (:func:`umf.data.relations.measured_relation` on those two: the crops hold them), cropped
     to ``frames`` every :data:`TAKE_STEP` frames in person 1's frame, neither mirrored nor
     carried on: features (2, frames, 262) de-normalised, each crop's take's captions, and
     where it was cut (the take's clip id, its first frame)."""
