@@ -8,8 +8,8 @@ import math
 import pytest
 import torch
 
-from umf.clearance import AROUND, beyond, crowded, touches, turned_free
-from umf.representation import assemble_features, features_to_joints
+from umf.clearance import AROUND, BEARINGS, beyond, crowded, touches, turned_free
+from umf.representation import assemble_features, features_to_joints, place_features
 
 pytestmark = pytest.mark.usefixtures("one_thread")
 
@@ -74,24 +74,30 @@ def test_beyond_moves_a_file_walker_off_a_body_it_meets_later():
 
 
 def test_beyond_steps_outwards_where_steps_by_a_start_do_not_clear():
-    """A walker still touching after stepping past everybody goes on outwards in 0.25 m
-    steps (at most four): here person 2 stands wide, so one start-sized step lands on them
-    again."""
-    person2 = _moving(0.5, 0.0, 0.5, 0.0)
-    wide = _moving(1.0, 0.0, 1.0, 0.0)  # person 3 of four already stands at 1.0
-    row = _moving(0.2, 0.0, 0.2, 0.0)[None]  # on person 2's spot
-    others = torch.tensor([[[0.5, 0.0], [1.0, 0.0]]])
-    bodies = _bodies(person2, wide)
-    moved = beyond(row, others, bodies, 0.3)
-    assert not bool(touches(moved, bodies, 0.3)[0])
-    x = float(features_to_joints(moved[:, :1])[0, 0, 0, 0])
-    assert x > 1.0 + 0.3  # past the outermost, on the same side
+    """A walker still touching someone after the start-sized steps goes on the same way in
+    0.25 m steps: one step beyond person 2 it is off their spot (0.9 m, ``SPOT`` 0.8) but
+    still within ``clear`` 1.2 of their body, so two more small steps (1.4 m)."""
+    person2 = _moving(0.9, 0.0, 0.9, 0.0)
+    row = _moving(0.9, 0.0, 0.9, 0.0)[None]  # on person 2's spot
+    others = torch.tensor([[[0.9, 0.0]]])
+    bodies = _bodies(person2)
+    start = beyond(row, others)
+    assert float(features_to_joints(start[:, :1])[0, 0, 0, 0]) == pytest.approx(1.8)
+    moved = beyond(row, others, bodies, 1.2)
+    assert not bool(touches(moved, bodies, 1.2)[0])
+    assert float(features_to_joints(moved[:, :1])[0, 0, 0, 0]) == pytest.approx(2.3)
+
+
+def _bearing(features: torch.Tensor) -> float:
+    start = features_to_joints(features[:, :1])[0, 0, 0, [0, 2]]
+    return math.degrees(math.atan2(float(start[0]), float(start[1])))
 
 
 def test_turned_free_turns_a_row_that_touches_only_later():
     """A row starting 2.4 m in front of person 1, well off person 2's start, whose body
-    walks onto person 2's later: turned about the origin to the smallest bearing that keeps
-    its whole motion ``body_clear`` away; without bodies it stays."""
+    walks onto person 2's later: turned about the origin to the first bearing of
+    ``BEARINGS`` that keeps its start ``AROUND`` from everybody's and its whole motion
+    ``body_clear`` from their bodies (found here by trying each); without bodies it stays."""
     person2 = _moving(0.05, 1.0, 0.05, 1.0)
     row = _moving(0.0, 2.4, 0.0, 1.0)[None]  # walks towards person 1, through person 2
     others = torch.tensor([[[0.05, 1.0]]])
@@ -103,25 +109,30 @@ def test_turned_free_turns_a_row_that_touches_only_later():
     assert bool(turned[0]) and not bool(touches(out, bodies, 0.45)[0])
     start = features_to_joints(out[:, :1])[0, 0, 0, [0, 2]]
     assert float(start.norm()) == pytest.approx(2.4, abs=1e-4)  # as far from person 1
-    assert float((start - others[0, 0]).norm()) >= AROUND
-    bearing = abs(math.degrees(math.atan2(float(start[0]), float(start[1]))))
-    assert 20.0 - 1e-3 <= bearing < 180.0
+    want = next(
+        yaw for yaw in BEARINGS
+        if not crowded(place_features(row[0], yaw, 0.0, 0.0)[None], others, AROUND)[0]
+        and not touches(place_features(row[0], yaw, 0.0, 0.0)[None], bodies, 0.45)[0]
+    )  # fmt: skip
+    assert _bearing(out) == pytest.approx(_bearing(place_features(row[0], want, 0.0, 0.0)[None]))
+    assert abs(math.degrees(want)) > 20.0  # the start rule alone would have stopped at 20
 
 
 def test_turned_free_falls_back_to_the_start_rule_where_no_bearing_clears():
-    """Person 1's body in the list stands where every bearing passes (the row walks to
-    the origin): a row on someone's spot takes the smallest bearing the start rule allows,
-    as without bodies; a row on nobody's spot stays."""
-    leader = _moving(0.0, 0.0, 0.0, 0.0)
+    """Person 3 stands next to person 1, and the row walks up to person 1: every bearing
+    meets person 3. A row on someone's spot (person 2's) takes the smallest bearing the
+    start rule allows, as without bodies; a row on nobody's spot stays."""
+    person2, person3 = _moving(0.05, 2.45, 0.05, 2.45), _moving(0.0, 0.0, 0.0, 0.0)
     row = _moving(0.0, 2.4, 0.0, 0.1)[None]
-    others = torch.tensor([[[0.05, 2.45]]])
-    bodies = _bodies(leader)
+    others = torch.tensor([[[0.05, 2.45], [0.0, 0.0]]])
+    bodies = _bodies(person2, person3)
     rule, _ = turned_free(row, others)
     out, turned = turned_free(row, others, bodies=bodies, body_clear=0.45)
     assert bool(turned[0])
     torch.testing.assert_close(out, rule)
-    # off everybody's spot, on person 1's body only: no turn helps, so it stays
-    away = torch.tensor([[[3.0, -3.0]]])
-    out, turned = turned_free(row, away, bodies=bodies, body_clear=0.45)
+    # person 2 elsewhere: on nobody's spot, on person 3's body whatever the bearing: stays
+    away = torch.tensor([[[3.0, -3.0], [0.0, 0.0]]])
+    far = _bodies(_moving(3.0, -3.0, 3.0, -3.0), person3)
+    out, turned = turned_free(row, away, bodies=far, body_clear=0.45)
     assert not bool(turned[0])
     torch.testing.assert_close(out, row)

@@ -501,9 +501,29 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         torch.testing.assert_close(rate, torch.tensor([2.5 / 1.6]))
         assert torch.equal(z[1], bank.latents[30][0])  # not with the leader: as retrieved
         assert not torch.allclose(z[0], bank.latents[30][0])
+        # with warm_apart's starts and warm_clear's bodies (people 1..k - 1), the played
+        # row is moved by beyond() against people 2..k - 1 alone: person 1 is clear_of's
+        seen = []
+
+        def spy_beyond(features, others, bodies=None, clear=0.0):
+            seen.append((others.clone(), bodies.clone(), clear))
+            return features
+
+        monkeypatch.setattr(umf.warm_start, "beyond", spy_beyond)
+        cfg.warm_play, cfg.warm_clear = True, 0.55
+        others = torch.tensor([[[0.9, 0.0]], [[-0.9, 0.0]]])
+        bodies = torch.randn(2, 2, 30, 22, 3)
+        gens = [torch.Generator().manual_seed(s) for s in range(2)]
+        proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
+                 others=others, bodies=bodies)  # fmt: skip
+        ((got_others, got_bodies, clear),) = seen
+        torch.testing.assert_close(got_others, others[:1])  # row 0 travels with person 1
+        torch.testing.assert_close(got_bodies, bodies[:1, 1:])
+        assert clear == 0.55
     finally:
         (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
          cfg.warm_play, pipe.reactions) = old  # fmt: skip
+        cfg.warm_clear = 0.0
 
 
 def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch):
@@ -535,41 +555,158 @@ def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch
 
 
 def test_warm_clear_gives_person_3_everybodys_bodies(models, monkeypatch):
-    """With ``sflow.warm_clear`` the proposal for person k >= 3 also gets the joints of
-    people 1..k - 1 (person 1's first, as :func:`umf.warm_start.sample_added` decodes them),
-    and the first pass is tested against them at that clearance (a touching one is sampled
-    again, fitting or not)."""
+    """With ``sflow.warm_clear`` the proposal for person k >= 3 gets the joints of people
+    1..k - 1, person 1's first, decoded as person 1; :func:`turned_free` gets those of
+    people 2..k - 1 (in step with their starts); person 2 gets none."""
+    import umf.models.sflow
     import umf.warm_start
+    from umf.representation import features_to_joints
 
     pipe = models["warm"]
-    seen, taken = [], []
-    real = umf.warm_start.proposal
+    seen, turned, contexts = [], [], []
+    real, real_turned = umf.warm_start.proposal, umf.warm_start.turned_free
+    real_sample = umf.models.sflow.SFlow.sample
 
     def spy(p, first, decoded, *args, bodies=None, **kwargs):
         seen.append(None if bodies is None else bodies.clone())
         return real(p, first, decoded, *args, bodies=bodies, **kwargs)
 
-    def always(features, bodies, clear):  # every first pass on someone: every row taken
-        taken.append(clear)
-        return torch.ones(len(features), dtype=torch.bool)
+    def spy_turned(features, others, *args, bodies=None, **kwargs):
+        turned.append((others.shape, None if bodies is None else bodies.clone()))
+        return real_turned(features, others, *args, bodies=bodies, **kwargs)
+
+    def spy_sample(self, prev, *args, warm=None, **kwargs):
+        if warm is None:
+            contexts.append(prev.clone())
+        return real_sample(self, prev, *args, warm=warm, **kwargs)
 
     monkeypatch.setattr(umf.warm_start, "proposal", spy)
+    monkeypatch.setattr(umf.warm_start, "turned_free", spy_turned)
+    monkeypatch.setattr(umf.models.sflow.SFlow, "sample", spy_sample)
     cfg = pipe.config.sflow
     try:
         cfg.warm_apart, cfg.warm_clear = True, 0.45
         scene = _scene(pipe, people=4)
-        monkeypatch.setattr(umf.warm_start, "touches", always)
-        again = _scene(pipe, people=3)
     finally:
         cfg.warm_apart, cfg.warm_clear = False, 0.0
     assert seen[0] is None  # person 2: nobody to keep off but person 1, a partner
     assert seen[1].shape[:2] == (1, 2) and seen[2].shape[:2] == (1, 3)
     assert seen[2].shape[-2:] == (22, 3) and torch.isfinite(seen[2]).all()
     torch.testing.assert_close(seen[1], seen[2][:, :2])  # the same people 1 and 2
-    assert np.isfinite(scene.joints).all() and np.isfinite(again.joints).all()
-    # person 3 of three: the first pass tested at warm_clear, whether to move it itself
-    # (a proposal not at its pace) and whether to take the second pass
-    assert taken == [0.45, 0.45]
+    frames = seen[1].shape[2]
+    person1 = features_to_joints(pipe.decode(contexts[1][:, 0], frames, reaction=False))
+    torch.testing.assert_close(seen[1][:, 0], person1)  # decoded as person 1, not a reaction
+    assert not torch.allclose(seen[2][:, 0], seen[2][:, 1])
+    assert [t[0][1] for t in turned] == [1, 2]  # people 2..k - 1's starts ...
+    torch.testing.assert_close(turned[1][1], seen[2][:, 1:])  # ... and their bodies alone
+    assert np.isfinite(scene.joints).all()
+
+
+def test_warm_clear_takes_again_the_rows_whose_first_pass_touches(models, monkeypatch):
+    """A row whose first pass touches someone (at ``sflow.warm_clear``) takes the second
+    pass, whatever the other rules say; a row that touches nobody keeps its first pass
+    (here every other rule keeps it: ``warm_glide`` so high that nothing glides, nobody on
+    anyone's spot, nobody turned)."""
+    import umf.warm_start
+
+    pipe = models["warm"]
+    prompts = ["two people walk side by side"] * 2
+
+    def nobody(features, others, *args, **kwargs):
+        return torch.zeros(len(features), dtype=torch.bool)
+
+    def unturned(features, others, **kwargs):
+        return features, nobody(features, others)
+
+    monkeypatch.setattr(umf.warm_start, "crowded", nobody)
+    monkeypatch.setattr(umf.warm_start, "turned_free", unturned)
+
+    def marked(rows):
+        def touches(features, bodies, clear):
+            assert clear == 0.45
+            return torch.tensor(rows[: len(features)], dtype=torch.bool)
+
+        return touches
+
+    cfg = pipe.config.sflow
+    scenes = {}
+    try:
+        cfg.warm_apart, cfg.warm_clear, cfg.warm_glide = True, 0.45, 1e6
+        for name, rows in (("none", [False, False]), ("first", [True, False])):
+            monkeypatch.setattr(umf.warm_start, "touches", marked(rows))
+            scenes[name] = pipe(prompts, num_people=3, seconds=1.0, seed=0, fit=False,
+                                separate=False)  # fmt: skip
+    finally:
+        cfg.warm_apart, cfg.warm_clear, cfg.warm_glide = False, 0.0, 0.0
+    none, first = scenes["none"], scenes["first"]
+    for a, b in zip(none, first, strict=True):  # people 1 and 2 are untouched
+        np.testing.assert_array_equal(a.joints[:2], b.joints[:2])
+    assert not np.allclose(none[0].joints[2], first[0].joints[2])  # taken again
+    np.testing.assert_array_equal(none[1].joints[2], first[1].joints[2])  # kept
+
+
+def test_warm_clear_moves_a_touching_first_pass_itself_without_a_fitting_proposal(
+    models, monkeypatch
+):
+    """Person 3's first pass touches someone in both rows; row 0's proposal does not fit
+    (no real reaction at its pace), row 1's does, and row 1 answers. The second pass starts
+    from row 0's own first pass, and from the proposal in row 1 (an answer keeps its retimed
+    proposal, a fitting one is taken as it is)."""
+    import umf.models.sflow
+    import umf.warm_start
+
+    pipe = models["warm"]
+    passes = []
+    real_sample = umf.models.sflow.SFlow.sample
+
+    def spy_sample(self, prev, *args, warm=None, **kwargs):
+        w, nfe = real_sample(self, prev, *args, warm=warm, **kwargs)
+        if prev.shape[1] == 2:
+            passes.append((w.clone(), None if warm is None else warm.clone()))
+        return w, nfe
+
+    def proposal(p, first, *args, **kwargs):
+        return first * 0.0 + 3.0, 0, torch.tensor([False, True]), None
+
+    def timed(p, guess, prev, lag, frames, leader):
+        return guess, torch.tensor([False, False])
+
+    def touching(features, bodies, clear):
+        return torch.ones(len(features), dtype=torch.bool)
+
+    def unturned(features, others, **kwargs):
+        return features, torch.zeros(len(features), dtype=torch.bool)
+
+    monkeypatch.setattr(umf.models.sflow.SFlow, "sample", spy_sample)
+    monkeypatch.setattr(umf.warm_start, "proposal", proposal)
+    monkeypatch.setattr(umf.warm_start, "timed_proposal", timed)
+    monkeypatch.setattr(umf.warm_start, "touches", touching)
+    monkeypatch.setattr(umf.warm_start, "turned_free", unturned)
+    cfg = pipe.config.sflow
+    try:
+        cfg.warm_apart, cfg.warm_clear = True, 0.55
+        pipe(["two people walk side by side"] * 2, num_people=3, seconds=1.0, seed=0,
+             fit=False, separate=False)  # fmt: skip
+    finally:
+        cfg.warm_apart, cfg.warm_clear = False, 0.0
+    (first, _), (_, warm) = passes
+    torch.testing.assert_close(warm[0], first[0])  # itself
+    torch.testing.assert_close(warm[1], torch.full_like(warm[1], 3.0))  # the proposal
+    # an answer keeps its proposal too
+    passes.clear()
+
+    def answering(p, guess, prev, lag, frames, leader):
+        return guess, torch.tensor([True, False])
+
+    monkeypatch.setattr(umf.warm_start, "timed_proposal", answering)
+    try:
+        cfg.warm_apart, cfg.warm_clear = True, 0.55
+        pipe(["two people walk side by side"] * 2, num_people=3, seconds=1.0, seed=0,
+             fit=False, separate=False)  # fmt: skip
+    finally:
+        cfg.warm_apart, cfg.warm_clear = False, 0.0
+    (_, warm) = passes[1]
+    torch.testing.assert_close(warm, torch.full_like(warm, 3.0))
 
 
 def test_warm_start_group_is_person_3_onwards_time(models, monkeypatch):

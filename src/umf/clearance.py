@@ -58,11 +58,13 @@ def beyond(features: Tensor, others: Tensor, bodies: Tensor | None = None,
     start, person 1's frame; NaN: nobody), by that person's own start, and by as much again
     while it lands on someone. Person 3 of a row walking side by side walks on person 2's far
     side, of a single file behind person 2: each does to the one before what person 2 does
-    to person 1. With ``bodies`` (B, M, T, 22, 3) and ``clear`` > 0 (``sflow.warm_clear``),
-    a row that :func:`touches` one of them at any frame where the one whose start is nearest
-    its own starts more ahead or behind person 1 than beside them (a single file) is moved
-    the same way, by that start, until it touches nobody (at most M steps); a row still on
-    someone's spot or body after those goes on the same way in 0.25 m steps (at most 4).
+    to person 1. With ``bodies`` (B, M, T, 22, 3: the joints of the same people 2..k - 1 as
+    ``others``) and ``clear`` > 0 (``sflow.warm_clear``), a row that :func:`touches` the body
+    of the one whose start is nearest its own, where that one starts more ahead of or behind
+    person 1 than beside them (a single file), is moved the same way, by that start, until
+    it touches nobody (at most M steps); a row still on someone's spot or body after those
+    goes on the same way in 0.25 m steps (at most 4). Person 1 is not among ``bodies``: a
+    row travelling with them keeps off them by :func:`clear_of`.
     Beside someone (a row), touching alone moves nobody: moved sideways, the third runner of
     a row kept pace in 8 of 16 seeds (13 without), and the val rows touched as often
     (results/umf-small-bandai-20261215)."""
@@ -77,10 +79,10 @@ def beyond(features: Tensor, others: Tensor, bodies: Tensor | None = None,
     near = gap.argmin(dim=1)
     hit = gap.gather(1, near[:, None])[:, 0] < SPOT
     step = others[torch.arange(len(others), device=others.device), near]  # (B, 2)
-    if whole:  # on nobody's spot but on the body of someone ahead or behind: a file
-        hit = hit | (
-            ~hit & touches(features, bodies, clear) & (step[:, 1].abs() > step[:, 0].abs())
-        )
+    if whole:  # on nobody's spot but on the body of the one ahead or behind: a file
+        theirs = bodies[torch.arange(len(bodies), device=bodies.device), near][:, None]
+        filed = step[:, 1].abs() > step[:, 0].abs()
+        hit = hit | (~hit & filed & touches(features, theirs, clear))
     step = torch.where(hit[:, None], step, torch.zeros_like(step))
     for _ in range(others.shape[1]):
         if not bool(hit.any()):
@@ -106,7 +108,7 @@ def crowded(features: Tensor, others: Tensor, spot: float = SPOT) -> Tensor:
 
 def touches(features: Tensor, bodies: Tensor, clear: float) -> Tensor:
     """(B,) whether some joint of each row of ``features`` (B, T, 262) comes within ``clear``
-    (m) of a joint of one of ``bodies`` (B, M, T, 22, 3: people 2..k - 1's joints, same
+    (m) of a joint of one of ``bodies`` (B, M, T, 22, 3: other people's joints, same
     frame) at any frame: the relation checks' ``no_contact`` over the whole motion, where
     :func:`crowded` reads the first frame's pelvis only. People who start 1.2 m apart
     around person 1 still bowed into each other, and a circle's six crowded in front of them
@@ -140,11 +142,12 @@ def turned_free(
     and (B,) which were turned. A reaction that faces person 1 (an answer, an audience
     member, someone walking over) still faces them from its new bearing; the bank holds pairs
     only, so the third member of an audience had no real reaction standing beside the second
-    one to take. With ``bodies`` (B, M, T, 22, 3) and ``body_clear`` > 0
-    (``sflow.warm_clear``), a row that :func:`touches` one of them is turned too, to the
-    smallest bearing that also keeps every joint ``body_clear`` from theirs throughout; where
-    no bearing does, a row on someone's spot takes the start rule's and any other stays (a
-    turn about person 1 cannot take anyone off person 1's body)."""
+    one to take. With ``bodies`` (B, M, T, 22, 3: the joints of the same people 2..k - 1 as
+    ``others``) and ``body_clear`` > 0 (``sflow.warm_clear``), a row that :func:`touches` one
+    of them is turned too, to the smallest bearing that also keeps every joint
+    ``body_clear`` from theirs throughout; where no bearing does, a row on someone's spot
+    takes the start rule's and any other stays. Person 1 is not among ``bodies``: a turn
+    about them keeps a row as far from a person 1 who stands still."""
     whole = bodies is not None and body_clear > 0
     spot = crowded(features, others)
     hit = spot | touches(features, bodies, body_clear) if whole else spot

@@ -239,8 +239,8 @@ class SFlowConfig:
     # single file: umf.clearance.beyond), anyone else retrieved away from them and turned
     # about person 1 to a free bearing (an audience: turned_free); the S-Flow, trained on
     # pairs, puts every added person where it would put a partner of person 1
-    # (results/reactions-20261208); warm_clear > 0: also off their bodies, every joint, every
-    # frame (m; umf.clearance.touches)
+    # (results/reactions-20261208); warm_clear > 0: also off the bodies of people 1..k - 1,
+    # every joint, every frame (m; umf.clearance.touches)
     warm_apart: bool = False
     warm_clear: float = 0.0
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit

@@ -198,8 +198,8 @@ def proposal(
     person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
     their first pass's side (played at it with ``sflow.warm_play``); ``others`` (B, M, 2):
     where people 2..k - 1 start (``sflow.warm_apart``), whose spots and sides the row's
-    reaction keeps off; ``bodies`` (B, M, T, 22, 3): their joints, with ``sflow.warm_clear``
-    (:func:`beyond`)."""
+    reaction keeps off; ``bodies`` (B, M + 1, T, 22, 3): the joints of people 1..k - 1,
+    person 1 first, with ``sflow.warm_clear`` (:func:`beyond` reads people 2..k - 1's)."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -247,8 +247,8 @@ def proposal(
                 reaction = clear_of(reaction, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
             if others is not None:  # on someone's spot (or body): beyond them
-                moved = beyond(reaction, others[rows], None if bodies is None else bodies[rows],
-                               cfg.warm_clear)  # fmt: skip
+                moved = beyond(reaction, others[rows], None if bodies is None
+                               else bodies[rows, 1:], cfg.warm_clear)  # fmt: skip
                 changed = changed | (moved != reaction).any(dim=2).any(dim=1)
                 reaction = moved
             if bool(changed.any()):
@@ -461,8 +461,9 @@ def sample_added(
             rows = free.nonzero().flatten()
             if len(rows):
                 seen = pipe.decode(guess[rows], frames, reaction=True)
-                moved, hit = turned_free(seen, others[rows], bodies=None if bodies is None
-                                         else bodies[rows], body_clear=cfg.warm_clear)  # fmt: skip
+                theirs = None if bodies is None else bodies[rows, 1:]  # people 2..k - 1
+                moved, hit = turned_free(seen, others[rows], bodies=theirs,
+                                         body_clear=cfg.warm_clear)  # fmt: skip
                 if bool(hit.any()):
                     guess, turned = guess.clone(), turned.clone()
                     guess[rows[hit]] = pipe._encode(moved[hit]).to(guess)
