@@ -683,29 +683,27 @@ def test_warm_clear_moves_a_touching_first_pass_itself_without_a_fitting_proposa
     monkeypatch.setattr(umf.warm_start, "touches", touching)
     monkeypatch.setattr(umf.warm_start, "turned_free", unturned)
     cfg = pipe.config.sflow
-    try:
-        cfg.warm_apart, cfg.warm_clear = True, 0.55
-        pipe(["two people walk side by side"] * 2, num_people=3, seconds=1.0, seed=0,
-             fit=False, separate=False)  # fmt: skip
-    finally:
-        cfg.warm_apart, cfg.warm_clear = False, 0.0
-    (first, _), (_, warm) = passes
+
+    def two_rows_of_three():
+        passes.clear()
+        try:
+            cfg.warm_apart, cfg.warm_clear = True, 0.55
+            pipe(["two people walk side by side"] * 2, num_people=3, seconds=1.0, seed=0,
+                 fit=False, separate=False)  # fmt: skip
+        finally:
+            cfg.warm_apart, cfg.warm_clear = False, 0.0
+        (first, _), (_, warm) = passes
+        return first, warm
+
+    first, warm = two_rows_of_three()
     torch.testing.assert_close(warm[0], first[0])  # itself
     torch.testing.assert_close(warm[1], torch.full_like(warm[1], 3.0))  # the proposal
-    # an answer keeps its proposal too
-    passes.clear()
 
-    def answering(p, guess, prev, lag, frames, leader):
+    def answering(p, guess, prev, lag, frames, leader):  # an answer keeps its proposal too
         return guess, torch.tensor([True, False])
 
     monkeypatch.setattr(umf.warm_start, "timed_proposal", answering)
-    try:
-        cfg.warm_apart, cfg.warm_clear = True, 0.55
-        pipe(["two people walk side by side"] * 2, num_people=3, seconds=1.0, seed=0,
-             fit=False, separate=False)  # fmt: skip
-    finally:
-        cfg.warm_apart, cfg.warm_clear = False, 0.0
-    (_, warm) = passes[1]
+    _, warm = two_rows_of_three()
     torch.testing.assert_close(warm, torch.full_like(warm, 3.0))
 
 
