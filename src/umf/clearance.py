@@ -66,7 +66,7 @@ def beyond(features: Tensor, others: Tensor, bodies: Tensor | None = None,
     goes on the same way in 0.25 m steps (at most 4). Person 1 is not among ``bodies``: a
     row travelling with them keeps off them by :func:`clear_of`.
     Beside someone (a row), touching alone moves nobody: moved sideways, the third runner of
-    a row kept pace in 8 of 16 seeds (13 without), and the val rows touched as often
+    a row kept pace in 8 of 16 seeds (13 without), and the val rows touched about as often
     (results/umf-small-bandai-20261215)."""
     whole = bodies is not None and clear > 0
 
