@@ -1,11 +1,19 @@
 """Throw-away: group_checks / keep_pace with the caption shortlist narrowed to captions within
 DELTA of the best one (env UMF_DELTA)."""
-import os, sys, runpy
-sys.path.insert(0, "/work/main/research")
+
+import os
+import runpy
+import sys
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).resolve().parents[3] / "research"))
 import torch
+
 import umf.reaction_bank as rb
+
 DELTA = float(os.environ["UMF_DELTA"])
 orig = rb.ReactionBank._shortlisted
+
 
 def _shortlisted(self, length, prompt, shortlist, like, mirror=None):
     out = orig(self, length, prompt, shortlist, like, mirror)
@@ -14,6 +22,7 @@ def _shortlisted(self, length, prompt, shortlist, like, mirror=None):
     sims = prompt.to(like) @ self.texts[length].to(like).T
     best = sims.masked_fill(~out, -torch.inf).max(dim=1, keepdim=True).values
     return out & (sims >= best - DELTA)
+
 
 rb.ReactionBank._shortlisted = _shortlisted
 script = sys.argv[1]
