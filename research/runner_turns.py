@@ -13,8 +13,10 @@
    along the leader's heading and speed over the leader's (``research/keep_pace.py``'s
    measure; FAIL: someone ends more than 1 m behind).
 3. With ``--causes``: how long the training runners last and how many of them the flows'
-   crops carry to 4 s, whether the VAE bends them, and the P-Flow's leader alone ("A person
-   runs.", and the pair's prompt at other step budgets and guidance scales).
+   crops carry to 4 s, whether the VAE bends them, the P-Flow's leader alone ("A person
+   runs.", and the pair's prompt at other step budgets and guidance scales), and the
+   leader's turn against the scene's length (2.6-5 s: runners of the pair's prompt curve
+   more the longer they run past their training scenes; walkers and a runner alone do not).
 """
 
 from __future__ import annotations
@@ -37,6 +39,14 @@ def turn_deg(path: np.ndarray) -> float:
     """The angle (degrees, + to the right) from a floor path's (T, 2) first 2-second chord to
     its second."""
     a, b = path[HALF] - path[0], path[-1] - path[HALF]
+    return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
+
+
+def turn_halves(path: np.ndarray) -> float:
+    """:func:`turn_deg` between the chords of a floor path's (T, 2) two halves, whatever its
+    length."""
+    half = len(path) // 2
+    a, b = path[half] - path[0], path[-1] - path[half]
     return float(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
 
 
@@ -131,6 +141,23 @@ def leader_turns(pipe, seeds: int) -> None:
     cfg.steps, cfg.guidance = steps, guidance
 
 
+def length_turns(pipe, seeds: int) -> None:
+    """Person 1's turn between the halves of its path (raw) against the scene's length: the
+    pair's runner leader, a pair's walking leader, and a runner of one's own. The training
+    run scenes last 78 frames (2.6 s) at the median."""
+    for prompt, n in (("Two people run side by side.", 2), ("Two people walk side by side.", 2),
+                      ("A person runs.", 1)):  # fmt: skip
+        for seconds in (2.6, 3.0, 4.0, 5.0):
+            turns = []
+            for s in range(seeds):
+                (scene,) = pipe(prompt, num_people=n, seconds=seconds, seed=s, fit=False,
+                                separate=False, anchor=False)  # fmt: skip
+                turns.append(turn_halves(np.asarray(scene.joints[0, :, 0])[:, [0, 2]]))
+            print(f"3. {prompt!r}, {seconds:g} s, raw: leader turns between halves "
+                  + " ".join(f"{t:+.0f}" for t in turns)
+                  + f" deg, median {np.median(turns):+.0f}")  # fmt: skip
+
+
 def generated_turns(pipe, seeds: int) -> None:
     fps = pipe.config.fps
     for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
@@ -173,6 +200,7 @@ def main() -> None:
         scene_lengths(pipe, corpus)
         vae_turns(pipe, corpus)
         leader_turns(pipe, args.seeds)
+        length_turns(pipe, args.seeds)
 
 
 if __name__ == "__main__":

@@ -35,3 +35,21 @@ def test_a_turn_to_the_right_is_positive():
     assert runner_turns.turn_deg(left) == pytest.approx(-90.0)
     right = left * np.array([-1.0, 1.0])
     assert runner_turns.turn_deg(right) == pytest.approx(90.0)
+
+
+@pytest.mark.parametrize("frames", [79, 120, 151])
+def test_turn_halves_reads_a_known_turn_at_any_length(frames):
+    """A path straight along +z for its first half, then turned 30 degrees towards -x (to
+    the right of someone facing +z, whose left is +x): +30, whatever its length; mirrored,
+    -30; at 4 s (120 frames) the same as turn_deg's 2-second chords."""
+    half = frames // 2
+    right = np.radians(30.0)
+    first = np.stack([np.zeros(half + 1), np.linspace(0.0, 1.0, half + 1)], -1)
+    way = np.array([-np.sin(right), np.cos(right)])
+    second = first[-1] + np.linspace(0.0, 1.0, frames - half)[1:, None] * way
+    path = np.concatenate([first, second])
+    assert len(path) == frames
+    assert runner_turns.turn_halves(path) == pytest.approx(30.0, abs=1e-6)
+    assert runner_turns.turn_halves(path * np.array([-1.0, 1.0])) == pytest.approx(-30.0, abs=1e-6)
+    if frames == 120:
+        assert runner_turns.turn_deg(path) == pytest.approx(30.0, abs=1e-6)
