@@ -16,7 +16,7 @@ from pathlib import Path
 
 import numpy as np
 
-from umf.io import atomic_path
+from umf.io import save_png_atomic
 
 
 def bars(groups: dict, model: str) -> tuple[list[str], dict[str, list[float]]]:
@@ -53,8 +53,7 @@ def draw(groups: dict, model: str, out: Path) -> None:
     ax.legend(fontsize=7, ncol=4, loc="upper center")
     ax.grid(axis="y", alpha=0.3)
     fig.tight_layout()
-    with atomic_path(out) as tmp:  # no half-written picture
-        fig.savefig(tmp, dpi=120, format="png")
+    save_png_atomic(fig, out, dpi=120)
     plt.close(fig)
 
 

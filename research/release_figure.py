@@ -37,6 +37,8 @@ def draw(out: Path, keeps: dict[str, dict], protocols: dict[str, dict]) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from umf.io import save_png_atomic
+
     fig, axes = plt.subplots(1, 2, figsize=(11, 3.6))
     for ax, data, title in ((axes[0], {k: keep_shares(v) for k, v in keeps.items()},
                              "followers keep pace (share of seeds)"),
@@ -52,10 +54,8 @@ def draw(out: Path, keeps: dict[str, dict], protocols: dict[str, dict]) -> None:
         ax.set_title(title, fontsize=10)
         ax.legend(fontsize=8, loc="lower right" if ax is axes[0] else "upper right")
     fig.tight_layout()
-    tmp = out.with_suffix(".tmp.png")
-    fig.savefig(tmp, dpi=100)
+    save_png_atomic(fig, out, dpi=100)
     plt.close(fig)
-    tmp.replace(out)
 
 
 def named_files(items: list[str]) -> dict[str, dict]:

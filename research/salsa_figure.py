@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from umf.io import atomic_path
+from umf.io import save_png_atomic
 
 PANELS = (("hands_near", "hands near (share of frames)"),
           ("penetration_cm", "bodies overlap, mean depth (cm)"))  # fmt: skip
@@ -53,8 +53,7 @@ def draw(rows: list[dict], real: list[dict], out: Path, chosen: float | None = N
     axes[0].legend(fontsize=7, loc="upper left")
     fig.suptitle('"Two people dance salsa together.", 4 s, delivered', fontsize=10)
     fig.tight_layout()
-    with atomic_path(out) as tmp:  # no half-written picture
-        fig.savefig(tmp, dpi=120, format="png")
+    save_png_atomic(fig, out, dpi=120)
     plt.close(fig)
 
 

@@ -33,6 +33,8 @@ def plot(traces: dict[str, Sequence[np.ndarray]], stats: dict[str, list[float]],
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
+    from umf.io import save_png_atomic
+
     fig, axes = plt.subplots(len(traces), 1, figsize=(8, 1.9 * len(traces)), sharex=True,
                              sharey=True, squeeze=False)  # fmt: skip
     for ax, (name, people) in zip(axes[:, 0], traces.items(), strict=True):
@@ -47,10 +49,8 @@ def plot(traces: dict[str, Sequence[np.ndarray]], stats: dict[str, list[float]],
     fig.suptitle(f"{label}: right wrist, sideways from the pelvis (each line one person)",
                  fontsize=10)  # fmt: skip
     fig.tight_layout()
-    tmp = path.with_name(f".{path.name}.tmp.png")
-    fig.savefig(tmp, dpi=90)
+    save_png_atomic(fig, path, dpi=90)
     plt.close(fig)
-    tmp.replace(path)
 
 
 def main() -> None:

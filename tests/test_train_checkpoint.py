@@ -1,4 +1,5 @@
 import json
+from pathlib import Path
 
 import pytest
 import torch
@@ -188,3 +189,27 @@ def test_temporaries_of_a_killed_writer_are_removed(tmp_path):
         tmp.write_text("done")
     assert remove_stale_temporaries(tmp_path) == 1
     assert sorted(p.name for p in tmp_path.iterdir()) == ["keep.tmp", "x.txt"]
+
+
+def test_a_figure_is_written_whole_or_not_at_all(tmp_path):
+    """save_png_atomic: a PNG at the path, and a figure that fails to draw leaves the old
+    picture and no temporary beside it."""
+    from matplotlib.figure import Figure
+
+    from umf.io import save_png_atomic
+
+    fig = Figure(figsize=(2, 1))
+    fig.subplots().plot([0, 1], [1, 0])
+    out = save_png_atomic(fig, tmp_path / "a.png", dpi=50)
+    first = out.read_bytes()
+    assert out == tmp_path / "a.png" and first[:8] == b"\x89PNG\r\n\x1a\n"
+
+    class Broken:
+        def savefig(self, path, **kwargs):
+            Path(path).write_bytes(b"half")
+            raise RuntimeError("drawing failed")
+
+    with pytest.raises(RuntimeError):
+        save_png_atomic(Broken(), out)
+    assert out.read_bytes() == first
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["a.png"]

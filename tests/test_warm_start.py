@@ -501,8 +501,8 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         torch.testing.assert_close(rate, torch.tensor([2.5 / 1.6]))
         assert torch.equal(z[1], bank.latents[30][0])  # not with the leader: as retrieved
         assert not torch.allclose(z[0], bank.latents[30][0])
-        # with warm_apart's starts and warm_clear's bodies (people 1..k - 1), the played
-        # row is moved by beyond() against people 2..k - 1 alone: person 1 is clear_of's
+        # with warm_apart's starts and warm_clear's bodies of people 2..k - 1, the played
+        # row is moved by beyond() against those (person 1 is clear_of's)
         seen = []
 
         def spy_beyond(features, others, bodies=None, clear=0.0):
@@ -512,13 +512,13 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         monkeypatch.setattr(umf.warm_start, "beyond", spy_beyond)
         cfg.warm_play, cfg.warm_clear = True, 0.55
         others = torch.tensor([[[0.9, 0.0]], [[-0.9, 0.0]]])
-        bodies = torch.randn(2, 2, 30, 22, 3)
+        bodies = torch.randn(2, 1, 30, 22, 3)
         gens = [torch.Generator().manual_seed(s) for s in range(2)]
         proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
                  others=others, bodies=bodies)  # fmt: skip
         ((got_others, got_bodies, clear),) = seen
         torch.testing.assert_close(got_others, others[:1])  # row 0 travels with person 1
-        torch.testing.assert_close(got_bodies, bodies[:1, 1:])
+        torch.testing.assert_close(got_bodies, bodies[:1])
         assert clear == 0.55
     finally:
         (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
@@ -555,17 +555,21 @@ def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch
 
 
 def test_warm_clear_gives_person_3_everybodys_bodies(models, monkeypatch):
-    """With ``sflow.warm_clear`` the proposal for person k >= 3 gets the joints of people
-    1..k - 1, person 1's first, decoded as person 1; :func:`turned_free` gets those of
-    people 2..k - 1 (in step with their starts); person 2 gets none."""
+    """With ``sflow.warm_clear`` the proposal and :func:`turned_free` for person k >= 3 get
+    the joints of people 2..k - 1 (in step with their starts), and the first pass is tested
+    once against people 1..k - 1, person 1 decoded as person 1; person 2 gets none."""
     import umf.models.sflow
     import umf.warm_start
     from umf.representation import features_to_joints
 
     pipe = models["warm"]
-    seen, turned, contexts = [], [], []
+    seen, turned, contexts, everyone = [], [], [], []
     real, real_turned = umf.warm_start.proposal, umf.warm_start.turned_free
-    real_sample = umf.models.sflow.SFlow.sample
+    real_sample, real_touches = umf.models.sflow.SFlow.sample, umf.warm_start.touches
+
+    def spy_touches(features, bodies, clear):
+        everyone.append((bodies.clone(), clear))
+        return real_touches(features, bodies, clear)
 
     def spy(p, first, decoded, *args, bodies=None, **kwargs):
         seen.append(None if bodies is None else bodies.clone())
@@ -583,6 +587,7 @@ def test_warm_clear_gives_person_3_everybodys_bodies(models, monkeypatch):
     monkeypatch.setattr(umf.warm_start, "proposal", spy)
     monkeypatch.setattr(umf.warm_start, "turned_free", spy_turned)
     monkeypatch.setattr(umf.models.sflow.SFlow, "sample", spy_sample)
+    monkeypatch.setattr(umf.warm_start, "touches", spy_touches)
     cfg = pipe.config.sflow
     try:
         cfg.warm_apart, cfg.warm_clear = True, 0.45
@@ -590,15 +595,19 @@ def test_warm_clear_gives_person_3_everybodys_bodies(models, monkeypatch):
     finally:
         cfg.warm_apart, cfg.warm_clear = False, 0.0
     assert seen[0] is None  # person 2: nobody to keep off but person 1, a partner
-    assert seen[1].shape[:2] == (1, 2) and seen[2].shape[:2] == (1, 3)
+    assert seen[1].shape[:2] == (1, 1) and seen[2].shape[:2] == (1, 2)
     assert seen[2].shape[-2:] == (22, 3) and torch.isfinite(seen[2]).all()
-    torch.testing.assert_close(seen[1], seen[2][:, :2])  # the same people 1 and 2
+    torch.testing.assert_close(seen[1], seen[2][:, :1])  # the same person 2
+    assert [t[0][1] for t in turned] == [1, 2]  # people 2..k - 1's starts ...
+    torch.testing.assert_close(turned[1][1], seen[2])  # ... and their bodies
+    # the first pass, once per person k >= 3, against everybody: person 1 first
+    assert [(b.shape[1], clear) for b, clear in everyone] == [(2, 0.45), (3, 0.45)]
+    torch.testing.assert_close(everyone[1][0][:, 1:], seen[2])
     frames = seen[1].shape[2]
     person1 = features_to_joints(pipe.decode(contexts[1][:, 0], frames, reaction=False))
-    torch.testing.assert_close(seen[1][:, 0], person1)  # decoded as person 1, not a reaction
-    assert not torch.allclose(seen[2][:, 0], seen[2][:, 1])
-    assert [t[0][1] for t in turned] == [1, 2]  # people 2..k - 1's starts ...
-    torch.testing.assert_close(turned[1][1], seen[2][:, 1:])  # ... and their bodies alone
+    torch.testing.assert_close(everyone[0][0][:, 0], person1)  # as person 1, not a reaction
+    torch.testing.assert_close(everyone[1][0][:, 0], person1)
+    assert not torch.allclose(everyone[1][0][:, 0], everyone[1][0][:, 1])
     assert np.isfinite(scene.joints).all()
 
 

@@ -34,6 +34,14 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         raise
 
 
+def save_png_atomic(fig: Any, path: str | os.PathLike, **savefig: Any) -> Path:
+    """A matplotlib figure written to ``path`` as PNG through a temporary file: a killed
+    run leaves the old picture or none, never half of one. ``savefig``: e.g. ``dpi``."""
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", **savefig)
+    return Path(path)
+
+
 def remove_stale_temporaries(folder: str | os.PathLike) -> int:
     """Delete the ``.NAME.*.tmp`` files :func:`atomic_path` leaves when its process is
     killed (kill -9 skips the clean-up); call where one writer owns the folder. Returns how

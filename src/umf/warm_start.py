@@ -198,8 +198,8 @@ def proposal(
     person 2), whose pace the rows that travel with them keep (``sflow.warm_together``), on
     their first pass's side (played at it with ``sflow.warm_play``); ``others`` (B, M, 2):
     where people 2..k - 1 start (``sflow.warm_apart``), whose spots and sides the row's
-    reaction keeps off; ``bodies`` (B, M + 1, T, 22, 3): the joints of people 1..k - 1,
-    person 1 first, with ``sflow.warm_clear`` (:func:`beyond` reads people 2..k - 1's)."""
+    reaction keeps off; ``bodies`` (B, M, T, 22, 3): the same people's joints, with
+    ``sflow.warm_clear`` (:func:`beyond`)."""
     cfg = pipe.config.sflow
     if cfg.warm_proposal == "retrieved":
         if pipe.reactions is None:
@@ -248,7 +248,7 @@ def proposal(
                 fits, changed = fits | together, ~changed
             if others is not None:  # on someone's spot (or body): beyond them
                 moved = beyond(reaction, others[rows], None if bodies is None
-                               else bodies[rows, 1:], cfg.warm_clear)  # fmt: skip
+                               else bodies[rows], cfg.warm_clear)  # fmt: skip
                 changed = changed | (moved != reaction).any(dim=2).any(dim=1)
                 reaction = moved
             if bool(changed.any()):
@@ -434,18 +434,19 @@ def sample_added(
         # person 1 (for a re-rolled person 1, person 2: the one they keep pace with)
         leader = (pipe.decode(prev[:, 0], frames, reaction=not answers_first)
                   if cfg.warm_together > 0 else None)  # fmt: skip
-        others = None  # where people 2..k - 1 start, for person k >= 3 (sflow.warm_apart)
-        bodies = None  # and everybody's joints, person 1's too, with sflow.warm_clear
+        # for person k >= 3: where people 2..k - 1 start (sflow.warm_apart) and their joints
+        # (sflow.warm_clear), and whether the first pass touches anyone, person 1 too
+        others = bodies = touching = None
         if cfg.warm_apart and prev.shape[1] > 1:
             b, n = prev.shape[:2]
             there = pipe.decode(prev[:, 1:].flatten(0, 1), frames, reaction=True)
             others = floor_start(there).reshape(b, n - 1, 2)
             if cfg.warm_clear > 0:
+                bodies = features_to_joints(there).reshape(b, n - 1, frames, 22, 3)
                 first = leader if leader is not None else pipe.decode(
                     prev[:, 0], frames, reaction=not answers_first)  # fmt: skip
-                bodies = torch.cat([features_to_joints(first)[:, None],
-                                    features_to_joints(there).reshape(b, n - 1, frames, 22, 3)],
-                                   dim=1)  # fmt: skip
+                everyone = torch.cat([features_to_joints(first)[:, None], bodies], dim=1)
+                touching = touches(decoded, everyone, cfg.warm_clear)
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
                                        answers_first=answers_first, leader=leader,
@@ -455,15 +456,14 @@ def sample_added(
         if others is not None:  # people not travelling with person 1 turn to a free bearing
             together = together_rows(pipe, decoded, leader)
             free = ~together if together is not None else torch.ones_like(turned)
-            if bodies is not None:  # on someone's body, no real reaction at its pace: itself
-                itself = free & ~fits & ~answer & touches(decoded, bodies, cfg.warm_clear)
+            if touching is not None:  # on someone's body, no real reaction at its pace: itself
+                itself = free & ~fits & ~answer & touching
                 guess = torch.where(itself[:, None, None], w, guess)
             rows = free.nonzero().flatten()
             if len(rows):
                 seen = pipe.decode(guess[rows], frames, reaction=True)
-                theirs = None if bodies is None else bodies[rows, 1:]  # people 2..k - 1
-                moved, hit = turned_free(seen, others[rows], bodies=theirs,
-                                         body_clear=cfg.warm_clear)  # fmt: skip
+                moved, hit = turned_free(seen, others[rows], bodies=None if bodies is None
+                                         else bodies[rows], body_clear=cfg.warm_clear)  # fmt: skip
                 if bool(hit.any()):
                     guess, turned = guess.clone(), turned.clone()
                     guess[rows[hit]] = pipe._encode(moved[hit]).to(guess)
@@ -476,7 +476,7 @@ def sample_added(
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer | turned
         if others is not None:  # a first pass on someone's spot is sampled again, gliding or not
             take = take | (fits & crowded(decoded, others))
-        if bodies is not None:  # a first pass on someone's body at any frame, fitting or not
-            take = take | touches(decoded, bodies, cfg.warm_clear)
+        if touching is not None:  # a first pass on someone's body at any frame, fitting or not
+            take = take | touching
         w = torch.where(take[:, None, None], again, w)
     return w, nfe

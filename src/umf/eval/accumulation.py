@@ -27,7 +27,7 @@ from umf.eval.physics import (
     penetration_with_previous,
     person_physics,
 )
-from umf.io import atomic_path, write_text_atomic
+from umf.io import save_png_atomic, write_text_atomic
 
 Generator = Callable[[list[str], int, int], Sequence[Any]]
 """``generate(prompts, num_people, seed)`` -> one scene (N, T, 22, 3) per prompt."""
@@ -185,5 +185,4 @@ def plot_accumulation(
         ax.legend(fontsize=8)
     for ax in axes[len(names) :]:
         ax.set_visible(False)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save_png_atomic(fig, path)

@@ -54,7 +54,7 @@ from umf.eval.plan import (
 )
 from umf.eval.protocol import ProtocolConfig, corpus_items, score_protocol
 from umf.eval.relations import real_scene_joints, relation_accuracy
-from umf.io import atomic_path, write_json_atomic, write_text_atomic
+from umf.io import atomic_path, save_png_atomic, write_json_atomic, write_text_atomic
 from umf.pipeline import Scene
 from umf.version import __version__
 
@@ -343,8 +343,7 @@ def plot_relations(relations: dict[str, dict[str, Any]], path: Path) -> None:
         ax.set_title(f"relation checks passed: {name}", fontsize=10)
         ax.legend(fontsize=8, ncol=len(sources), loc="upper center")
         ax.grid(axis="y", alpha=0.3)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save_png_atomic(fig, path)
 
 
 def motion_section(corpus: Corpus, contenders: Sequence[Contender], plan: EvalPlan,

@@ -9,7 +9,7 @@ from collections.abc import Callable, Mapping, Sequence
 from pathlib import Path
 from typing import Any, NamedTuple
 
-from umf.io import atomic_path
+from umf.io import atomic_path, save_png_atomic
 
 Log = Callable[[str], None]
 METRICS_FILE, CURVES_FILE = "metrics.csv", "loss_curves.png"
@@ -107,5 +107,4 @@ def plot_curves(rows: Sequence[Row], path: Path) -> None:
         ax.legend(fontsize=8)
     for ax in axes[len(names) :]:
         ax.set_visible(False)
-    with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png")
+    save_png_atomic(fig, path)
