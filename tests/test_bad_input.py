@@ -50,6 +50,7 @@ def _bad_models(root: Path, good: Path) -> None:
     first = next(iter(weights))
     weights[first] = torch.full_like(weights[first], float("nan"))
     save_file(weights, str(nan / "vae.safetensors"))
+    (copy("nopflow") / "pflow.safetensors").unlink()
     zero = copy("zerostd")
     save_file({"mean": torch.zeros(262), "std": torch.zeros(262)},
               str(zero / "normalizer.safetensors"))  # fmt: skip
@@ -74,6 +75,19 @@ def _inputs(d: Path) -> None:
     (d / "afile").write_text("not a directory\n")
     (d / "adir").mkdir()
     (d / "out" / "00-x.npz").mkdir(parents=True)  # a directory where a file would go
+    np.savez(d / "HUGE.npz", joints=pose * 1e4)  # 10,000 times a body's size: in no unit
+    (d / "dangling").symlink_to(d / "nothing-here")
+    libs = {  # mocap folders whose CSV files are broken
+        "badcap": {"captions.csv": 'file,caption\na.bvh,"a person bows\nb.bvh,bows\n'},
+        "extracap": {"captions.csv": "file,caption\na.bvh,bows,twice\n"},
+        "hugedx": {"takes.csv": "take,file,person,dx,dz\nt,a.bvh,1,0,0\nt,b.bvh,2,1e30,0\n"},
+    }
+    for name, files in libs.items():
+        (d / name).mkdir()
+        for bvh in ("a.bvh", "b.bvh"):
+            (d / name / bvh).write_text(text)
+        for f, body in files.items():
+            (d / name / f).write_text(body)
 
 
 G = ["generate", "x", "--out", "out/new"]
@@ -101,6 +115,7 @@ CASES = [
     ([*G, "--steps", "45,5,5"], 1, "--steps needs 2 count(s)"),
     ([*G, "--steps", "0,5"], 1, "--steps must be between 1 and 200, got 0"),
     ([*G, "--steps", "a,b"], 1, "--steps takes integers"),
+    ([*G, "--steps", ""], 1, "--steps takes integers"),
     ([*G, "--sflow-steps", "0"], 1, "--sflow-steps must be between 1 and 200, got 0"),
     ([*G, "--sflow-steps", "-1"], 1, "--sflow-steps must be between 1 and 200"),
     ([*G, "--sflow-steps", "100000"], 1, "--sflow-steps must be between 1 and 200"),
@@ -123,7 +138,12 @@ CASES = [
     (["generate", "x", "--out", "afile"], 1, "--out afile exists and is not a directory"),
     (["generate", "x", "--out", "afile/sub"], 1, "afile is not a directory"),
     (["generate", "x", "--out", "out"], 1, "a directory has that name"),
+    (["generate", "x", "--out", "dangling"], 1, "--out dangling is a symbolic link to nothing"),
     ([*G, "--bogus"], 2, "No such option: --bogus"),
+    # ports
+    ([*G, "--view", "--port", "-1"], 1, "--port must be 0-65535 (0: any free port), got -1"),
+    (["view", "GOOD.npz", "--port", "70000", "--no-open"], 1, "--port must be 0-65535"),
+    (["serve", "--port", "65536"], 1, "--port must be 0-65535"),
     # model directories
     ([*G, "--model", "nowhere"], 1, "model not found"),
     ([*G, "--model", "afile"], 1, "model not found"),
@@ -145,10 +165,76 @@ CASES = [
     ([*R, "--guidance", "nan"], 1, "--guidance must be a finite number"),
     ([*R, "--batch", "0"], 1, "--batch must be between 1 and 256"),
     (["react", "x", "--actor", "ZERO.npz", "--out", "out/new"], 1, "not a body"),
+    (["react", "x", "--actor", "HUGE.npz", "--out", "out/new"], 1, "a person's size in no unit"),
+    (["view", "HUGE.npz", "--no-open"], 1, "a body 3.08e+04 units tall"),
+    (["data", "show", "HUGE.npz", "--out", "x.gif"], 1, "a person's size in no unit"),
+    (
+        ["data", "show", "GOOD.npz", "--out", "x.gif", "--stride", "100000"],
+        1,
+        "--stride must be between 1 and 39, got 100000",
+    ),
     (["react", "x", "--actor", "FT0.bvh", "--out", "out/new"], 1, "Frame Time: 0"),
     (["react", "x", "--actor", "missing.bvh", "--out", "out/new"], 1, "file not found"),
     # eval, data, train
     (["eval", "--checkpoint", "m", "--device", "tpu"], 1, "--device must be auto, cpu or cuda"),
+    (["eval", "--checkpoint", "m", "--out", "afile"], 1, "--out afile exists and is not a dir"),
+    (
+        ["data", "prepare", "--bandai", str(BANDAI_FIXTURE), "--out", "afile"],
+        1,
+        "--out afile exists and is not a directory",
+    ),
+    # a broken CSV of a mocap folder: one line naming it, and no corpus folder left behind
+    (
+        ["data", "prepare", "--mocap", "badcap", "--out", "c", "--no-progress"],
+        1,
+        "badcap/captions.csv, line 2: a field runs over several lines (a quote left open?)",
+    ),
+    (
+        ["data", "prepare", "--mocap", "extracap", "--out", "c", "--no-progress"],
+        1,
+        "extracap/captions.csv, line 2: 3 fields, the header names 2",
+    ),
+    (
+        ["data", "prepare", "--mocap", "hugedx", "--out", "c", "--no-progress"],
+        1,
+        "takes.csv, line 3: person must be 1..16 and dx/dz metres within ±100",
+    ),
+    # fine-tuning: everything it needs, checked before anything is written
+    (
+        ["train", "finetune", "--from", "{models}/good", "--corpus", "nowhere", "--out", "afile"],
+        1,
+        "--out afile exists and is not a directory",
+    ),
+    (
+        ["train", "finetune", "--from", "{models}/nopflow", "--corpus", "nowhere", "--out", "run"],
+        1,
+        "missing module file pflow.safetensors",
+    ),
+    (
+        [
+            "train",
+            "finetune",
+            "--from",
+            "{models}/good",
+            "--corpus",
+            "nowhere",
+            "--out",
+            "run",
+            "--accelerator",
+            "tpu",
+        ],
+        1,
+        "cannot set up training on tpu",
+    ),
+    # info: a damaged model is an error, not a description
+    (["info", "{models}/notjson"], 1, "config.json: unreadable"),
+    (["info", "{models}/nopflow"], 1, "missing module file pflow.safetensors"),
+    (["info", "{models}/good", "--prompt", " "], 1, "the prompt is empty"),
+    (
+        ["info", "{models}/good", "--prompt", "walk"],
+        1,
+        "cannot score --prompt: this model carries no vocabulary",
+    ),
     (
         ["data", "prepare", "--bandai", str(BANDAI_FIXTURE), "--out", "c", "--train-scenes", "-1"],
         1,
@@ -190,7 +276,7 @@ CASES = [
 
 
 def _tree(root: Path) -> dict[str, tuple[int, int]]:
-    return {str(p.relative_to(root)): (p.stat().st_size, p.stat().st_mtime_ns)
+    return {str(p.relative_to(root)): (p.lstat().st_size, p.lstat().st_mtime_ns)
             for p in root.rglob("*")}  # fmt: skip
 
 
@@ -235,3 +321,32 @@ def test_python_dash_m_umf(tmp_path):
     assert not list(tmp_path.iterdir())
     r = subprocess.run([sys.executable, "-m", "umf", "--version"], capture_output=True, text=True)
     assert r.returncode == 0 and r.stdout.startswith("umf ")
+
+
+def test_sigterm_ends_a_run_as_ctrl_c_does(models, tmp_path, monkeypatch, capsys):
+    """SIGTERM (kill, docker stop): exit 143, one line, no temporary folder or partial file,
+    even where the signal's exception comes out of a C extension as another (a TypeError
+    from matplotlib, seen while a GIF was drawn)."""
+    import os
+    import signal
+    import time
+
+    import umf.writer
+
+    def killed(scene, stem, wanted):
+        stem.with_suffix(".npz").write_bytes(b"half a file")
+        try:
+            os.kill(os.getpid(), signal.SIGTERM)
+            time.sleep(5)  # the handler raises at the next bytecode
+        except KeyboardInterrupt:
+            raise TypeError("incompatible function arguments") from None
+
+    monkeypatch.setattr(umf.writer, "write_formats", killed)
+    before = signal.getsignal(signal.SIGTERM)
+    with pytest.raises(SystemExit) as exit_:
+        run(["generate", "x", "--seconds", "1", "--model", str(models / "good"),
+             "--out", str(tmp_path / "o")])  # fmt: skip
+    assert exit_.value.code == 143
+    assert capsys.readouterr().err.strip() == "umf: terminated"
+    assert not [p for p in tmp_path.rglob("*") if p.is_file()]
+    assert signal.getsignal(signal.SIGTERM) is before  # the caller's handler is back

@@ -521,3 +521,21 @@ def test_clean_is_per_person(real_joints):
     assert out[1, ..., 1].min() < -0.015
     no_contacts = K.fit_bodies(joints, floor=0.0, clean=[True, False]).joints()
     assert no_contacts[0, ..., 1].min() >= -1e-9 and no_contacts[1, ..., 1].min() < -0.015
+
+
+def test_a_pose_float32_cannot_factor_is_fitted_without_an_error():
+    """Every joint on one line, 90 units tall: the normal matrices lose definiteness in
+    float32 and the step once raised a LinAlgError out of `umf data show`; now such a row
+    is damped again (or takes no step) and the fit ends with finite bodies."""
+    line = np.linspace(0, 1.7, NUM_JOINTS)[:, None].repeat(3, axis=1) * 30
+    joints = np.repeat(line[None, None], 8, axis=1).astype(np.float32)
+    normal = torch.zeros(2, 4, 4)
+    normal[0] = torch.eye(4)
+    normal[1, 0, 0] = -1.0  # cannot factor, even damped again: no step
+    grad = torch.ones(2, 4)
+    chol, info = torch.linalg.cholesky_ex(normal)
+    chol, grad = K._steady(normal, grad, info != 0, chol)
+    assert torch.equal(chol[0], torch.eye(4)) and torch.equal(grad[0], torch.ones(4))
+    assert torch.equal(grad[1], torch.zeros(4))  # a row that still does not factor stays
+    bodies = K.fit_bodies(joints, clean=False)
+    assert np.isfinite(bodies.joints()).all()

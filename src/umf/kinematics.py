@@ -264,6 +264,20 @@ def _cost(local: Tensor, root: Tensor, offsets: Tensor, target: Tensor, weight: 
     return (weight * ((pos - target) ** 2).sum(-1)).sum(-1)
 
 
+def _steady(normal: Tensor, grad: Tensor, bad: Tensor, chol: Tensor) -> tuple[Tensor, Tensor]:
+    """The Cholesky factors (B, n, n) and gradients (B, n) of one step, where the ``bad``
+    rows' normal matrices (B, n, n) did not factor: damped again by 1e-4 of their largest
+    diagonal entry, and a row that still does not factor takes no step (the fit must never
+    stop a command; poses it cannot fit stay where they were)."""
+    eye = torch.eye(normal.shape[-1], device=normal.device)
+    scale = normal.diagonal(dim1=-2, dim2=-1).amax(-1).clamp_min(1.0)
+    again, info = torch.linalg.cholesky_ex(normal + (1e-4 * scale)[:, None, None] * eye)
+    chol = torch.where(bad[:, None, None], again, chol)
+    stuck = bad & (info != 0)
+    chol = torch.where(stuck[:, None, None], eye, chol)
+    return chol, torch.where(stuck[:, None], torch.zeros_like(grad), grad)
+
+
 def _lm_step(
     local: Tensor, root: Tensor, offsets: Tensor, target: Tensor, weight: Tensor, damping: Tensor
 ) -> tuple[Tensor, Tensor]:
@@ -275,7 +289,9 @@ def _lm_step(
     eye = torch.eye(normal.shape[-1], device=normal.device)
     normal = normal + damping.float()[:, None, None] * eye
     normal[:, [0, 2], [0, 2]] += PINNED_DAMPING  # the pelvis keeps its horizontal path
-    chol = torch.linalg.cholesky(normal)
+    chol, info = torch.linalg.cholesky_ex(normal)
+    if bool((info != 0).any()):  # float32 lost definiteness (a body 90 units tall, in a line)
+        chol, grad = _steady(normal, grad, info != 0, chol)
     step = torch.cholesky_solve(grad[..., None], chol)[..., 0].to(local)
     omega = step[:, 3:].reshape(len(step), len(DRIVERS), 3)
     # a driver's new global rotation turns by everything at or above it (first order)

@@ -15,6 +15,10 @@ UNITS: dict[str, float] = {"m": 1.0, "cm": 0.01, "mm": 0.001, "in": 0.0254, "cmu
 # Span of a standing adult's joints (toe/ankle to head joint), metres: what a unit must give.
 STATURE_SPAN = (1.25, 2.1)
 NOMINAL_SPAN = 1.5  # where a body is scaled to when no unit gives a plausible span
+# Spans (file units) a body in metres may have where no unit gives an adult's: from a doll
+# to a statue (and random test data). Outside, and in no unit, a file is refused: a body
+# 10,000 times an adult's size is no motion of a person
+METRES_SPAN = (0.1, 100.0)
 
 
 def body_span(joints: np.ndarray) -> float:
@@ -39,3 +43,13 @@ def choose_unit(joints: np.ndarray) -> tuple[float, str]:
         _, name, u = min(fits)
         return u, name
     return NOMINAL_SPAN / span, "stature"
+
+
+def check_body_size(joints: np.ndarray, what: str) -> None:
+    """Refuse joints (..., 22, 3) in metres (a umf .npz, the API's actor) whose body is of no
+    person's size in metres nor in a unit :data:`UNITS` names."""
+    _, name = choose_unit(joints)
+    span = body_span(joints)
+    if name == "stature" and not METRES_SPAN[0] <= span <= METRES_SPAN[1]:
+        raise UMFError(f"{what}: a body {span:.3g} units tall, a person's size in no unit umf "
+                       f"knows ({', '.join(UNITS)})")  # fmt: skip

@@ -203,6 +203,8 @@ def check_batch(batch: Any, prompts: int) -> int:
 
 def check_out_dir(out: Path) -> Path:
     """An output directory that exists or can be created; nothing is created here."""
+    if out.is_symlink() and not out.exists():
+        raise UMFError(f"--out {out} is a symbolic link to nothing ({os.readlink(out)})")
     if out.exists() and not out.is_dir():
         raise UMFError(f"--out {out} exists and is not a directory")
     parent = out
@@ -215,6 +217,13 @@ def check_out_dir(out: Path) -> Path:
     if not os.access(parent, os.W_OK | os.X_OK):
         raise UMFError(f"--out {out}: {parent} is not writable")
     return out
+
+
+def check_port(port: int) -> int:
+    """A TCP port to listen on: 0 (any free one) to 65535."""
+    if not 0 <= port <= 65535:
+        raise UMFError(f"--port must be 0-65535 (0: any free port), got {port}")
+    return port
 
 
 def check_targets(paths: Sequence[Path]) -> None:
@@ -243,9 +252,10 @@ def check_actor(actor: Any, fps: float, max_frames: int) -> np.ndarray:
         raise UMFError(
             f"the actor motion spans only {extent:.3f} m: not a body (all joints at one point?)"
         )
-    from umf.units import choose_unit
+    from umf.units import check_body_size, choose_unit
 
     unit, name = choose_unit(actor)
+    check_body_size(actor, "the actor motion")
     if name not in ("m", "stature"):  # a body of an adult's size in another unit
         raise UMFError(f"the actor motion looks like it is in {name}, not metres (a body "
                        f"{1 / unit:g} times too large): multiply it by {unit:g}")  # fmt: skip

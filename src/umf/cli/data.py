@@ -109,8 +109,10 @@ def show(
 ) -> None:
     """Render a corpus item or a scene file as a stick-figure animation."""
     from umf import render
+    from umf.validation import check_int
 
     joints, text = load_item(item, corpus)
+    stride = check_int("--stride", stride, 1, max(1, joints.shape[1] - 1))
     text = caption if caption is not None else text
     if out.suffix == ".png":
         t = joints.shape[1]

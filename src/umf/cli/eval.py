@@ -8,7 +8,7 @@ from pathlib import Path
 import typer
 
 from umf.errors import UMFError
-from umf.validation import check_device
+from umf.validation import check_device, check_out_dir
 
 DEFAULT_CORPUS = Path("out/corpus")
 
@@ -102,10 +102,11 @@ def evaluate(
         ("--device", device if device != "auto" else None),
     ])  # fmt: skip
     device = check_device(device)
+    out = check_out_dir(out or Path("results") / model_label(checkpoint))
     req = EvalRequest(
         checkpoint=checkpoint,
         corpus=resolve_corpus(corpus),
-        out=out or Path("results") / model_label(checkpoint),
+        out=out,
         evaluator=resolve_evaluator(evaluator),
         variants=variants,
         plan=plan,

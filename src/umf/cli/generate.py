@@ -21,6 +21,7 @@ from umf.validation import (
     check_for_model,
     check_int,
     check_out_dir,
+    check_port,
     check_request,
     check_targets,
     chunk_size,
@@ -44,7 +45,7 @@ def parse_formats(formats: str) -> list[str]:
 
 def parse_steps(steps: str | None) -> list[int] | None:
     """``--steps 45,5`` as integers; their bounds are checked by :func:`check_request`."""
-    if not steps:
+    if steps is None:
         return None
     try:
         return [int(s) for s in steps.split(",")]
@@ -139,6 +140,7 @@ def generate(
     if view:  # before the work: say at once when the page cannot be shown
         from umf.serve.server import find_three, three_missing_message
 
+        check_port(port)
         if find_three() is None:
             raise UMFError(three_missing_message())
     jobs = [(k, text, j) for k, text in enumerate(texts) for j in range(batch)]

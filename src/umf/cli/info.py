@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from pathlib import Path
 
 import typer
@@ -17,30 +16,29 @@ def info(
                                      "(repeatable): known or not, and its nearest captions."),
 ) -> None:  # fmt: skip
     """List the model's actions, styles and multi-person relations; score prompts."""
-    from umf.cli.loading import peek_config
+    from umf.cli.loading import load_pipeline
     from umf.coverage import Vocabulary
     from umf.person_prompts import takes_person_prompts
     from umf.pipeline import default_model_dir
+    from umf.validation import check_text
 
+    prompt = [check_text(p) for p in prompt]
     path = model if model is not None else default_model_dir()
     if not (path / "config.json").exists():
         raise UMFError(f"{path}: not a model directory (no config.json)")
-    try:
-        fmt = (
-            json.loads((path / "format.json").read_text())
-            if (path / "format.json").exists()
-            else {}
-        )
-    except (OSError, ValueError):
-        fmt = {}
+    pipe = load_pipeline(model)  # a damaged model is said so here, not described
+    config = pipe.config
     vocab = Vocabulary.load(path)
-    typer.echo(f"model: {fmt.get('name') or path.name} ({path})")
-    config = peek_config(path)
-    own = config is not None and takes_person_prompts(config)
-    typer.echo("per-person prompts (--person): " + ("yes" if own else "no"))
+    typer.echo(f"model: {pipe.name} ({path})")
+    typer.echo(
+        "per-person prompts (--person): " + ("yes" if takes_person_prompts(config) else "no")
+    )
     if vocab is None:
-        typer.echo("this model carries no vocabulary (trained before umf 0.2, or exported "
-                   "without --corpus): `umf train vocabulary` adds one")  # fmt: skip
+        what = ("this model carries no vocabulary (trained before umf 0.2, or exported without "
+                "--corpus): `umf train vocabulary` adds one")  # fmt: skip
+        if prompt:
+            raise UMFError(f"cannot score --prompt: {what}")
+        typer.echo(what)
         return
     typer.echo(f"actions ({len(vocab.actions)}): {', '.join(vocab.actions)}")
     typer.echo(f"styles ({len(vocab.styles)}): {', '.join(vocab.styles)}")
@@ -49,7 +47,7 @@ def info(
                f"(cosine to the nearest one) is at least {vocab.threshold:.3f}")  # fmt: skip
     touching = sorted(vocab.contact)
     if touching:
-        take = config.sflow.warm_take if config is not None else 0.0
+        take = config.sflow.warm_take
         how = "the clean-up lets such a couple touch"
         if take:
             how = f"a couple worded like one is finished from one of them, warm_take {take:g}"
@@ -60,9 +58,6 @@ def info(
         for p in vocab.phrases:
             typer.echo(f"  {p}")
     if prompt:
-        from umf.pipeline import UMFPipeline
-
-        pipe = UMFPipeline.from_pretrained(model)
         for p, cov in zip(prompt, pipe.coverage(list(prompt)), strict=True):
             verdict = "known" if cov["known"] else "NOT known"
             touch = "; worded like a real take whose people touch" if "contact" in cov else ""

@@ -2,7 +2,10 @@
 
 from __future__ import annotations
 
+import signal
 import sys
+import threading
+from typing import Any
 
 import typer
 
@@ -73,33 +76,70 @@ def disk_full(exc: BaseException) -> str | None:
     return None
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (kill, systemd, docker stop), raised where Ctrl+C would be, so that the same
+    clean-up runs: no temporary folder or half-written file is left behind."""
+
+
 def run(argv: list[str] | None = None) -> None:
     """Console-script entry: user errors become one line on stderr and a non-zero exit
-    (1 for bad values and files, 2 for malformed command lines, as click uses)."""
+    (1 for bad values and files, 2 for malformed command lines, as click uses; 130 after
+    Ctrl+C, 143 after SIGTERM)."""
+    got: list[int] = []
+
+    def terminate(signum: int, frame: Any) -> None:
+        got.append(signum)
+        raise Terminated
+
+    main = threading.current_thread() is threading.main_thread()
+    previous = signal.signal(signal.SIGTERM, terminate) if main else None
     try:
-        code = app(args=argv, standalone_mode=False)
+        _run(argv, got)
+    except BaseException as exc:
+        # raised inside a C extension, the signal's exception can come out as another
+        # (a TypeError from matplotlib): after SIGTERM, whatever ends the run says so
+        if got and not (isinstance(exc, SystemExit) and exc.code in (0, None)):
+            print("umf: terminated", file=sys.stderr)
+            sys.exit(143)
+        raise
+    finally:
+        if main:
+            signal.signal(signal.SIGTERM, previous)
+
+
+def _run(argv: list[str] | None, got: list[int]) -> None:
+    """The command's outcome as a one-line message and an exit code; ``got``: the signals
+    run() caught (SIGTERM: "terminated", left to run())."""
+    try:
+        try:
+            code = app(args=argv, standalone_mode=False)
+        except BaseException:
+            if got:  # whatever the signal's exception became on its way up
+                raise Terminated from None
+            raise
     except click_errors.NoArgsIsHelpError as exc:
         exc.show()  # `umf` or `umf train` alone: the help, as before
         sys.exit(exc.exit_code)
     except click_errors.UsageError as exc:
         print(f"umf: error: {_one_line(exc.format_message())}", file=sys.stderr)
         sys.exit(exc.exit_code)
-    except typer.Abort:
+    except Terminated:
+        raise
+    except (typer.Abort, KeyboardInterrupt):  # Abort: click's word for Ctrl+C
         print("umf: interrupted", file=sys.stderr)
         sys.exit(130)
     except UMFError as exc:
         print(f"umf: error: {_one_line(str(exc))}", file=sys.stderr)
         sys.exit(1)
-    except KeyboardInterrupt:
-        print("umf: interrupted", file=sys.stderr)
-        sys.exit(130)
     except Exception as exc:  # a full disk under any wrapper; anything else is a bug: raise
         full = disk_full(exc)
         if full is None:
             raise
         print(f"umf: error: {full}", file=sys.stderr)
         sys.exit(1)
-    if code == 130:  # typer turns Ctrl-C into exit code 130
+    if code == 130:  # typer turns Ctrl-C (and a SIGTERM) into exit code 130
+        if got:
+            raise Terminated
         print("umf: interrupted", file=sys.stderr)
     sys.exit(code if isinstance(code, int) else 0)
 

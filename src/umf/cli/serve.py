@@ -12,6 +12,7 @@ from typing import Any
 import typer
 
 from umf.errors import UMFError
+from umf.validation import check_port
 
 HOST_HELP = "Address to listen on; keep 127.0.0.1 unless you mean to share the page."
 
@@ -99,6 +100,7 @@ def serve(
                                            "(scheme://host:port) allowed to POST (repeatable)."),
 ) -> None:  # fmt: skip
     """A local web page: type a prompt, see the scene in 3-D, download its files."""
+    check_port(port)
     app = _app(
         _loader(model), verbose=verbose, allowed_hosts=allowed_host, allowed_origins=allow_origin
     )
@@ -116,6 +118,7 @@ def view(
     """Open the 3-D viewer of `umf serve` on an existing scene file."""
     from umf.serve.scenes import add_glb_file, add_motion_file
 
+    check_port(port)
     if not file.is_file():
         raise UMFError(f"file not found: {file}")
     suffix = file.suffix.lower()

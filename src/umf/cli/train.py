@@ -38,7 +38,9 @@ def _run(stages, corpus, out, family, config, set_, max_steps, launch, resume,
          init: Path | None = None) -> None:  # fmt: skip
     from umf.errors import UMFError
     from umf.train.run import resolve_config, train_stage
+    from umf.validation import check_out_dir
 
+    check_out_dir(Path(out))
     fresh = not (Path(out) / "config.yaml").exists()
     if init is not None and family is None and config is None and fresh:
         config = Path(init) / "config.json"  # fine-tuning keeps the model's configuration
@@ -110,11 +112,18 @@ def finetune_command(
 ) -> None:  # fmt: skip
     """Teach a released model a new library: fine-tune its stages on a corpus that holds
     the new clips beside the model's own data (replay), then export RUN/model."""
+    from umf.cli.loading import load_pipeline
     from umf.pipeline import default_model_dir
+    from umf.train.loop import check_launch
     from umf.train.run import finetune
+    from umf.validation import check_out_dir
 
     model = default_model_dir() if str(from_) == "bundled" else from_
     launch = _launch(accelerator, devices, num_nodes, strategy, precision, progress, tensorboard)
+    # before anything is written: a missing pflow.safetensors was found after the VAE trained
+    check_out_dir(out)
+    load_pipeline(model)  # every module the run starts from or keeps loads
+    check_launch(accelerator, launch.devices, num_nodes, strategy, precision)
     path = finetune(
         model,
         corpus,

@@ -444,10 +444,31 @@ def prepare_corpus(
         loader_of(name)
         if not Path(path).exists():
             raise UMFError(f"{name} data not found: {path}")
+    from umf.validation import check_out_dir
+
     check_prepare_config(config)
+    check_out_dir(out)
     t0 = time.perf_counter()
     fresh = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        return _prepare_into(out, sources, config, progress, log, t0, fresh)
+    except BaseException:  # a bad captions.csv, Ctrl-C: a folder this run made goes too
+        if fresh:
+            shutil.rmtree(out, ignore_errors=True)
+        raise
+
+
+def _prepare_into(
+    out: Path,
+    sources: dict[str, Any],
+    config: PrepareConfig,
+    progress: bool,
+    log: Callable[[str], None],
+    t0: float,
+    fresh: bool,
+) -> dict[str, Any]:
+    """:func:`prepare_corpus` once ``out`` exists (``fresh``: this run made it)."""
     # a corpus that worked keeps working until the new one is complete: every file is
     # written into a staging folder and moved into place at the end, the manifest last
     stage = out / f".staging-{os.getpid()}"

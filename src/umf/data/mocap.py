@@ -42,6 +42,7 @@ from umf.units import choose_unit
 
 MOTION_SUFFIXES = (".bvh", ".txt", ".json")
 META_FILES = {"captions.csv", "takes.csv", "skeleton.json"}
+MAX_SHIFT = 100.0  # m: takes.csv's dx/dz correct a placement; 1e30 made a corpus of infinities
 MAX_TAKE_LENGTH_MISMATCH = 1  # frames: conversions sometimes drop the last frame of one file
 REFERENCE_JUMP = 0.06  # of the body's size: a first frame this far from the next is a pose
 LOOP_SECONDS = 6.0  # a looping clip (DeepMimic "Loop": "wrap") is repeated up to this long
@@ -168,7 +169,8 @@ def to_metres(raws: list[RawMotion]) -> tuple[list[np.ndarray], float, str]:
         unit, how = fixed.pop(), "given"
     else:
         unit, how = choose_unit(np.concatenate([r.joints for r in raws]))
-    return [(r.joints * unit).astype(np.float32) for r in raws], unit, how
+    with np.errstate(over="ignore"):  # 1e300 in a file: inf here, refused by the caller's check
+        return [(r.joints * unit).astype(np.float32) for r in raws], unit, how
 
 
 def tile_loop(joints: np.ndarray, min_frames: int) -> np.ndarray:
@@ -201,21 +203,28 @@ def _read_csv(path: Path, required: tuple[str, ...], optional: tuple[str, ...] =
         text = path.read_bytes().decode("utf-8-sig")
     except (OSError, UnicodeDecodeError) as exc:
         raise UMFError(f"{path}: not a readable UTF-8 file ({type(exc).__name__})") from None
-    rows = list(csv.DictReader(io.StringIO(text)))
-    header = [h.strip() for h in (csv.DictReader(io.StringIO(text)).fieldnames or [])]
+    reader = csv.DictReader(io.StringIO(text))
+    header = [h.strip() for h in (reader.fieldnames or [])]
     if tuple(header[: len(required)]) != required or not set(header) <= set(required + optional):
         raise UMFError(f"{path}: header must be {','.join(required)}"
                        + (f" (optionally {','.join(optional)})" if optional else "")
                        + f", got {','.join(header) or 'nothing'}")  # fmt: skip
-    out = []
-    for n, row in enumerate(rows, start=2):
-        row = {k.strip(): (v or "").strip() for k, v in row.items() if k is not None}
+    out, n = [], reader.line_num + 1
+    for raw in reader:
+        if None in raw:  # more fields than the header names: a stray comma, a lost column
+            raise UMFError(f"{path}, line {n}: {len(header) + len(raw[None])} fields, the "
+                           f"header names {len(header)}")  # fmt: skip
+        if any("\n" in v or "\r" in v for v in raw.values() if v):
+            raise UMFError(f"{path}, line {n}: a field runs over several lines (a quote left "
+                           f"open?)")  # fmt: skip
+        row = {k.strip(): (v or "").strip() for k, v in raw.items()}
         if any(not row.get(k) for k in required):
             raise UMFError(
                 f"{path}, line {n}: empty {'/'.join(k for k in required if not row.get(k))}"
             )
         row["_line"] = n
         out.append(row)
+        n = reader.line_num + 1
     return out
 
 
@@ -244,8 +253,9 @@ def scan_library(root: str | Path) -> MocapLibrary:
                 dx, dz = float(row.get("dx") or 0), float(row.get("dz") or 0)
             except ValueError:
                 raise UMFError(f"{where}: person must be a whole number, dx/dz numbers") from None
-            if not 1 <= person <= 16 or not (np.isfinite(dx) and np.isfinite(dz)):
-                raise UMFError(f"{where}: person must be 1..16 and dx/dz finite")
+            if not 1 <= person <= 16 or not (abs(dx) <= MAX_SHIFT and abs(dz) <= MAX_SHIFT):
+                raise UMFError(f"{where}: person must be 1..16 and dx/dz metres within "
+                               f"±{MAX_SHIFT:g}")  # fmt: skip
             lib.takes.setdefault(row["take"], []).append((row["file"], person, dx, dz))
             if row.get("caption"):
                 own = lib.person_captions.setdefault(row["take"], {})

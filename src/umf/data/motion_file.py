@@ -19,7 +19,7 @@ import numpy as np
 
 from umf.errors import UMFError
 from umf.scene import Scene
-from umf.units import choose_unit
+from umf.units import check_body_size, choose_unit
 
 FPS = 30.0
 MAX_NPZ_JOINTS_BYTES = 256 * 10**6  # 16 people x 10 min at 30 fps is 76 MB
@@ -123,6 +123,7 @@ def open_motion(path: str | Path) -> MotionFile:
             unit, name = choose_unit(joints)
         except UMFError as exc:
             raise UMFError(f"{path}: {exc}") from None
+        check_body_size(joints, str(path))
         if name not in ("m", "stature"):
             joints, meta["converted_from"] = joints * unit, name
     return MotionFile(np.ascontiguousarray(joints, dtype=np.float32), text, fps, meta)

@@ -184,6 +184,15 @@ def check_train_config(cfg: TrainConfig) -> None:
 
 
 def _launch(accelerator: str, devices: int | str, num_nodes: int, strategy: str, precision: str):
+    fabric = check_launch(accelerator, devices, num_nodes, strategy, precision)
+    fabric.launch()
+    return fabric
+
+
+def check_launch(accelerator: str, devices: int | str, num_nodes: int, strategy: str,
+                 precision: str) -> Any:  # fmt: skip
+    """Lightning Fabric set up for these options, not launched (one-line errors): a run can
+    say a bad ``--accelerator`` before it writes anything."""
     from lightning_fabric import Fabric
 
     # stages may leave parameters unused on some batches (per-dataset branches)
@@ -196,7 +205,6 @@ def _launch(accelerator: str, devices: int | str, num_nodes: int, strategy: str,
     except Exception as exc:  # Fabric reports misconfiguration with several types
         msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
         raise UMFError(f"cannot set up training on {accelerator}: {msg}") from exc
-    fabric.launch()
     return fabric
 
 
