@@ -882,3 +882,42 @@ def test_repeat_scene_gait_serves_short_striding_scenes_whole_carried_on(corpus,
         np.testing.assert_allclose(pose[:, 69 + 24], pose[:, 69], atol=1e-4)
         gap = joints[1, :, 0, [0, 2]] - joints[0, :, 0, [0, 2]]  # still side by side
         np.testing.assert_allclose(gap[:, -1], gap[:, 0], atol=1e-3)
+
+
+def test_leader_gait_carries_person_1_on_and_holds_the_others(corpus, monkeypatch):
+    """``leader_gait`` (the P-Flow's scenes): person 1 striding at the end repeats their last
+    cycle whatever the others do; the others hold their last pose; a walk up to someone is
+    not carried past them."""
+    actors = _striding_actors(corpus)
+    stands = np.repeat(actors["walker-b"].joints[:1], 70, axis=0)
+    actors["walker-b"] = dataclasses.replace(actors["walker-b"], joints=stands)
+    side = _recipe((1.0, 0.0), 0.0, SIDE_BY_SIDE)  # person 2 stands: no whole-scene gait
+    toward = {**_recipe((0.0, 6.0), math.pi, []), "id": "toward", "relation": "walk_toward"}
+    monkeypatch.setattr(corpus, "scenes", {"train": [side, toward]})
+    monkeypatch.setattr(corpus, "actors", lambda: actors)
+    both = D.SceneDataset(corpus, "train", None, 100, 130, mirror=False, real_clips=False,
+                          repeat_gait=True)  # fmt: skip
+    assert not both.extended
+    ds = D.SceneDataset(corpus, "train", None, 100, 130, mirror=False, real_clips=False,
+                        leader_gait=True)  # fmt: skip
+    assert ds.extended == {"scene-walk": [24, 0]}  # the walk up to someone stays as it is
+    it = ds[0]
+    assert it["start"] == 0 and 100 <= it["length"] <= 130
+    joints = features_to_joints(it["features"].double()).numpy()
+    pose = joints[0] - joints[0, :, :1]
+    np.testing.assert_allclose(pose[69 + 24], pose[69], atol=1e-4)  # person 1 strides on
+    travel = np.linalg.norm(joints[0, -1, 0, [0, 2]] - joints[0, 68, 0, [0, 2]])
+    assert travel > 0.3
+    np.testing.assert_allclose(joints[1, 69:], joints[1, 68:-1], atol=1e-4)  # person 2 held
+    assert ds[1]["length"] == 69  # walk_toward: served whole, no longer
+
+
+def test_repeat_leader_gait_is_the_p_flows_only():
+    from umf.config import UMFConfig, set_option
+    from umf.errors import UMFError
+    from umf.train.run import check_run_config
+
+    cfg = set_option(UMFConfig(), "train_pflow.repeat_leader_gait=true")
+    check_run_config(cfg)
+    with pytest.raises(UMFError, match=r"train_sflow\.repeat_leader_gait: only the P-Flow"):
+        check_run_config(set_option(cfg, "train_sflow.repeat_leader_gait=true"))

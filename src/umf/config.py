@@ -343,8 +343,8 @@ class TrainConfig:
     # the VAE and P-Flow then train on them alone, without scene batches (a scene's people
     # carry several labels), so a stage can be fine-tuned or probed on one kind of motion
     labels: tuple[str, ...] = ()
-    # give half the training captions the other spelling of direction words (backwards <->
-    # backward, forwards <-> forward, towards <-> toward; umf.train.datasets.respell_caption)
+    # give half the training captions the other spelling of direction words (backwards,
+    # forwards, towards without the s, and back; umf.train.datasets.respell_caption)
     respell_captions: bool = False
     # single-person items take, with this chance, the caption of a random clip that shares
     # their caption_mix_within metadata (content label and style) instead of their own
@@ -354,18 +354,18 @@ class TrainConfig:
     caption_mix_within: tuple[str, ...] = ("content", "style")
     # and only from clips whose metadata match these "key=value" pairs (e.g. style=normal)
     caption_mix_from: tuple[str, ...] = ()
-    # single-person clips shorter than min_frames whose body ends at rest are held in their
-    # last pose up to a full crop (umf.data.extension.ends_at_rest): the flow learns that a
-    # gesture ends standing, not what the latent of absent frames decodes to
+    # single-person clips shorter than min_frames that end at rest hold their last pose up to
+    # a full crop (umf.data.extension.ends_at_rest): a gesture ends standing, not gliding off
     hold_rest: bool = False
     # and those that end in a steady, straight gait repeat their last cycle up to a full crop
     # (umf.data.extension.gait_period): a 4 s run keeps running instead of slowing to a glide
     repeat_gait: bool = False
-    # scene batches: and composed scenes shorter than min_frames whose people travel together
-    # and all end in a steady gait, where their relation still holds
-    # (umf.data.extension.scene_gait_periods): a 4 s run side by side at a sprint, which
-    # Bandai's short runs never composed
+    # scene batches: and short composed scenes whose people travel together, all end in a
+    # steady gait and keep their relation (umf.data.extension.scene_gait_periods): a 4 s
+    # sprint side by side, which Bandai's short runs never composed
     repeat_scene_gait: bool = False
+    # P-Flow only: and those whose person 1 does, the others held (datasets.SceneDataset)
+    repeat_leader_gait: bool = False
     # and those that end neither, but slowly (every end speed under 1 m/s: a getup cut while
     # the pelvis still rises), are eased to a stop over their last frames, then held
     # (umf.data.extension.settle_times): a 4 s "get up" ends standing instead of bending again

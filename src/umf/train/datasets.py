@@ -39,6 +39,7 @@ from umf.data.extension import (
     extend_person,
     extend_scene,
     extension_period,
+    gait_period,
     scene_gait_periods,
 )
 from umf.data.scenes import build_scene, scene_features_of, scene_rotations
@@ -407,6 +408,11 @@ def crop_recipe(recipe: dict[str, Any], actors: dict, start: int, length: int) -
     return {**recipe, "num_frames": length, "people": people}
 
 
+# relations whose person 1 walks up to someone: carried on, they would walk past them
+# (the scene ends where they meet; umf.data.extension.scene_gait_periods)
+LEADER_STOPS = ("walk_toward",)
+
+
 class SceneDataset(_EpochDataset):
     """One multi-person scene per item, cropped in time for everybody, in person 1's frame.
 
@@ -420,6 +426,10 @@ class SceneDataset(_EpochDataset):
     is served from its start at a crop length from ``min_frames`` to ``max_frames``, each
     person's last cycle repeated
     (:func:`umf.data.extension.scene_gait_periods`); ``extended`` maps its id to the periods.
+    ``leader_gait`` (the P-Flow, which learns person 1 alone): a short composed scene whose
+    person 1 ends in a steady, straight gait (:func:`umf.data.extension.gait_period`) is
+    served the same way, person 1's last cycle repeated and everyone else held in their last
+    pose, except where person 1 walks up to the other (:data:`LEADER_STOPS`).
     """
 
     def __init__(
@@ -437,6 +447,7 @@ class SceneDataset(_EpochDataset):
         real_repeats: int = 1,
         relation_repeats: Mapping[str, int] | None = None,
         repeat_gait: bool = False,
+        leader_gait: bool = False,
     ) -> None:
         super().__init__(seed)
         if real_repeats < 1:
@@ -463,13 +474,18 @@ class SceneDataset(_EpochDataset):
         corpus.actors()  # built once here, so worker processes inherit it
         self.clip_captions = {c.id: c.captions for c in corpus.clips}
         self.extended: dict[str, list[int]] = {}
-        if repeat_gait:  # each distinct short scene once (relation_repeats serve some again)
-            short = {r["id"]: r for kind, r, _ in self.items
-                     if kind == "scene" and r["num_frames"] - 1 < min_frames}  # fmt: skip
-            for sid, r in short.items():
-                periods = scene_gait_periods(corpus.scene_joints(r), r, max_frames + 1)
-                if periods is not None:
-                    self.extended[sid] = periods
+        # each distinct short scene once (relation_repeats serve some again)
+        short = {r["id"]: r for kind, r, _ in self.items
+                 if kind == "scene" and r["num_frames"] - 1 < min_frames}  # fmt: skip
+        for sid, r in short.items() if repeat_gait else ():
+            periods = scene_gait_periods(corpus.scene_joints(r), r, max_frames + 1)
+            if periods is not None:
+                self.extended[sid] = periods
+        for sid, r in short.items() if leader_gait else ():
+            if sid not in self.extended and r.get("relation") not in LEADER_STOPS:
+                period = gait_period(corpus.scene_joints(r)[0])
+                if period:
+                    self.extended[sid] = [period] + [0] * (r["num_people"] - 1)
 
     def _own_captions(self, kind: str, item: Any, index: int) -> list[str]:
         """Each person's own caption: a wording of the clip a composed person plays

@@ -84,6 +84,8 @@ def check_run_config(cfg: UMFConfig) -> None:
         if stage in ("sflow", "evaluator") and getattr(cfg, f"train_{stage}").labels:
             raise UMFError(f"train_{stage}.labels: only the VAE and P-Flow train on "
                            "single-person clips, which have one content label each")  # fmt: skip
+        if stage != "pflow" and getattr(cfg, f"train_{stage}").repeat_leader_gait:
+            raise UMFError(f"train_{stage}.repeat_leader_gait: only the P-Flow (person 1)")
 
 
 def _train_cfg(cfg: UMFConfig, stage: str, max_steps: int | None) -> TrainConfig:
@@ -137,6 +139,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                 real_repeats=t.real_repeats if train else 1,
                 relation_repeats=relation_repeats(t.relation_repeats) if train else None,
                 repeat_gait=t.repeat_scene_gait,  # defines the target: validation too
+                leader_gait=t.repeat_leader_gait,
                 **common,
             )
         bank = None
