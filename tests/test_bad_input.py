@@ -71,6 +71,10 @@ def _inputs(d: Path) -> None:
     np.savez(d / "ZERO.npz", joints=np.zeros((40, 22, 3), np.float32))
     text = BOW.read_text()
     (d / "FT0.bvh").write_text(re.sub(r"Frame Time:\s*\S+", "Frame Time: 0", text, count=1))
+    head, motion = text.split("Frame Time:", 1)
+    rows = motion.split("\n")
+    rows[1] = " ".join(["1e300", *rows[1].split()[1:]])  # a root position no float32 holds
+    (d / "E300.bvh").write_text(head + "Frame Time:" + "\n".join(rows))
     (d / "two.txt").write_text("a person walks\ntwo people bow\n")
     (d / "afile").write_text("not a directory\n")
     (d / "adir").mkdir()
@@ -174,6 +178,7 @@ CASES = [
         "--stride must be between 1 and 39, got 100000",
     ),
     (["react", "x", "--actor", "FT0.bvh", "--out", "out/new"], 1, "Frame Time: 0"),
+    (["react", "x", "--actor", "E300.bvh", "--out", "out/new"], 1, "NaN or infinite values"),
     (["react", "x", "--actor", "missing.bvh", "--out", "out/new"], 1, "file not found"),
     # eval, data, train
     (["eval", "--checkpoint", "m", "--device", "tpu"], 1, "--device must be auto, cpu or cuda"),
@@ -280,6 +285,8 @@ def _tree(root: Path) -> dict[str, tuple[int, int]]:
             for p in root.rglob("*")}  # fmt: skip
 
 
+# a warning would be lines of its own on a user's stderr (pytest keeps them off capsys)
+@pytest.mark.filterwarnings("error::RuntimeWarning")
 @pytest.mark.parametrize(("args", "code", "message"), CASES, ids=[" ".join(c[0])[:60]
                                                                     for c in CASES])  # fmt: skip
 def test_bad_input(args, code, message, models, tmp_path, monkeypatch, capsys):
