@@ -229,6 +229,22 @@ def test_runners_keep_pace_with_their_leader(pipe):
     assert len(missed) <= 3, missed
 
 
+def test_a_4_second_runner_leader_runs_straight(pipe):
+    """ "Two people run side by side.", 4 s, seeds 0-7: person 1's path turns under 15
+    degrees between its two halves in at least 5 seeds. Bandai's runs last 2.6 s; 20261215's
+    P-Flow made up the rest and turned in 6 of 8 (-22 to -59 degrees, 2 under 15), and
+    its partner was left behind; 20261216 learnt short scenes' leaders carried on by their
+    own gait (``train_pflow.repeat_leader_gait``): 5 of 8 (results/umf-small-bandai-20261216)."""
+    straight = []
+    for seed in range(8):
+        (scene,) = pipe("Two people run side by side.", num_people=2, seconds=4.0, seed=seed)
+        p = np.asarray(scene.joints)[0, :, 0][:, [0, 2]]
+        a, b = p[60] - p[0], p[-1] - p[60]
+        turn = abs(np.degrees(np.arctan2(a[0] * b[1] - a[1] * b[0], a @ b)))
+        straight.append(bool(turn < 15.0))
+    assert sum(straight) >= 5, straight
+
+
 def test_people_3_to_n_start_off_the_spots_of_those_before_them(pipe):
     """Raw (no separation), seeds 0-3: in an audience, a single file and a row of three the
     closest two first-frame pelvises are at least 0.5 m apart, 0.8 m at the median.
