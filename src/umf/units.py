@@ -45,11 +45,13 @@ def choose_unit(joints: np.ndarray) -> tuple[float, str]:
     return NOMINAL_SPAN / span, "stature"
 
 
-def check_body_size(joints: np.ndarray, what: str) -> None:
+def check_body_size(joints: np.ndarray, name: str, what: str) -> None:
     """Refuse joints (..., 22, 3) in metres (a umf .npz, the API's actor) whose body is of no
-    person's size in metres nor in a unit :data:`UNITS` names."""
-    _, name = choose_unit(joints)
+    person's size in metres nor in a unit :data:`UNITS` names; ``name``: the unit
+    :func:`choose_unit` chose (the span is read again only where none fitted)."""
+    if name != "stature":
+        return
     span = body_span(joints)
-    if name == "stature" and not METRES_SPAN[0] <= span <= METRES_SPAN[1]:
+    if not METRES_SPAN[0] <= span <= METRES_SPAN[1]:
         raise UMFError(f"{what}: a body {span:.3g} units tall, a person's size in no unit umf "
                        f"knows ({', '.join(UNITS)})")  # fmt: skip

@@ -255,7 +255,7 @@ def check_actor(actor: Any, fps: float, max_frames: int) -> np.ndarray:
     from umf.units import check_body_size, choose_unit
 
     unit, name = choose_unit(actor)
-    check_body_size(actor, "the actor motion")
+    check_body_size(actor, name, "the actor motion")
     if name not in ("m", "stature"):  # a body of an adult's size in another unit
         raise UMFError(f"the actor motion looks like it is in {name}, not metres (a body "
                        f"{1 / unit:g} times too large): multiply it by {unit:g}")  # fmt: skip

@@ -123,7 +123,7 @@ def open_motion(path: str | Path) -> MotionFile:
             unit, name = choose_unit(joints)
         except UMFError as exc:
             raise UMFError(f"{path}: {exc}") from None
-        check_body_size(joints, str(path))
+        check_body_size(joints, name, str(path))
         if name not in ("m", "stature"):
             joints, meta["converted_from"] = joints * unit, name
     return MotionFile(np.ascontiguousarray(joints, dtype=np.float32), text, fps, meta)
