@@ -60,9 +60,9 @@ def variant_scores(sims: np.ndarray, crowd: np.ndarray) -> dict[str, np.ndarray]
     for k in (2, 3, 5, 10):
         out[f"mean of {k} nearest"] = top[:, :k].mean(axis=1)
     out["nearest less its crowding / 2"] = top[:, 0] - 0.5 * crowd[sims.argmax(axis=1)]
-    out["local scaling (CSLS, k 10)"] = 2 * top[:, 0] - top[:, :10].mean(axis=1) - crowd[
-        sims.argmax(axis=1)
-    ]
+    out["local scaling (CSLS, k 10)"] = (
+        2 * top[:, 0] - top[:, :10].mean(axis=1) - crowd[sims.argmax(axis=1)]
+    )
     return out
 
 
