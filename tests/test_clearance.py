@@ -8,7 +8,15 @@ import math
 import pytest
 import torch
 
-from umf.clearance import AROUND, BEARINGS, beyond, crowded, touches, turned_free
+from umf.clearance import (
+    AROUND,
+    BEARINGS,
+    beyond,
+    crowded,
+    formation_end,
+    touches,
+    turned_free,
+)
 from umf.representation import assemble_features, features_to_joints, place_features
 
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -136,3 +144,18 @@ def test_turned_free_falls_back_to_the_start_rule_where_no_bearing_clears():
     out, turned = turned_free(row, away, bodies=far, body_clear=0.45)
     assert not bool(turned[0])
     torch.testing.assert_close(out, row)
+
+
+def test_formation_end_goes_on_as_person_2_began():
+    """A row goes on sideways by person 2's offset from person 1, a file backwards, each
+    along that offset's larger axis only, from person k - 1's start (not person 1's);
+    nobody's formation where person 2 did not travel with person 1."""
+    row = torch.tensor([[[0.0, 0.1], [0.9, -0.3], [1.7, 0.0]]])  # people 1..3 beside
+    yes = torch.tensor([True])
+    torch.testing.assert_close(formation_end(row, yes), torch.tensor([[2.6, 0.0]]))
+    torch.testing.assert_close(formation_end(row[:, :2], yes), torch.tensor([[1.8, -0.3]]))
+    file = torch.tensor([[[0.1, 0.0], [-0.4, -2.0]]])  # person 2 behind person 1
+    torch.testing.assert_close(formation_end(file, yes), torch.tensor([[-0.4, -4.0]]))
+    both = torch.cat([row[:, :2], file])
+    got = formation_end(both, torch.tensor([False, True]))
+    assert torch.isnan(got[0]).all() and torch.equal(got[1], torch.tensor([-0.4, -4.0]))

@@ -520,6 +520,19 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         torch.testing.assert_close(got_others, others[:1])  # row 0 travels with person 1
         torch.testing.assert_close(got_bodies, bodies[:1])
         assert clear == 0.55
+        # with warm_extend's formation ends, the played row starts there before beyond()
+        starts = []
+
+        def spy_start(features, others, bodies=None, clear=0.0):
+            starts.append(rep.floor_start(features))
+            return features
+
+        monkeypatch.setattr(umf.warm_start, "beyond", spy_start)
+        ends = torch.tensor([[1.8, 0.2], [float("nan"), float("nan")]])
+        gens = [torch.Generator().manual_seed(s) for s in range(2)]
+        proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
+                 others=others, bodies=bodies, ends=ends)  # fmt: skip
+        torch.testing.assert_close(starts[0], ends[:1], atol=1e-4, rtol=0)
     finally:
         (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
          cfg.warm_play, pipe.reactions) = old  # fmt: skip
@@ -551,6 +564,41 @@ def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch
         cfg.warm_apart = False
     assert seen[2] is None and seen[3].shape == (1, 1, 2) and seen[4].shape == (1, 2, 2)
     assert torch.isfinite(seen[4]).all()
+    assert np.isfinite(scene.joints).all()
+
+
+def test_warm_extend_gives_person_k_where_the_formation_goes_on(models, monkeypatch):
+    """With ``sflow.warm_extend`` the proposal for person k >= 3 gets where the formation of
+    people 1..k - 1 goes on: person k - 1's start moved by person 2's offset from person 1
+    (all as decoded from the context); person 2's gets none, nor anyone's without it."""
+    import umf.warm_start
+    from umf.clearance import formation_end
+
+    pipe = models["warm"]
+    seen = []
+    real = umf.warm_start.proposal
+
+    def spy(p, first, decoded, *args, others=None, leader=None, ends=None, **kwargs):
+        seen.append((others, leader, ends))
+        return real(p, first, decoded, *args, others=others, leader=leader, ends=ends, **kwargs)
+
+    def everyone(a, b, cosine):  # person 2 travels with person 1
+        return torch.ones(len(a), dtype=torch.bool)
+
+    monkeypatch.setattr(umf.warm_start, "proposal", spy)
+    monkeypatch.setattr(umf.warm_start, "travels_with", everyone)
+    cfg = pipe.config.sflow
+    try:
+        cfg.warm_apart, cfg.warm_together = True, 0.8
+        _scene(pipe, people=4)
+        cfg.warm_extend = True
+        scene = _scene(pipe, people=4)
+    finally:
+        cfg.warm_apart, cfg.warm_together, cfg.warm_extend = False, 0.0, False
+    assert [ends is None for _, _, ends in seen] == [True, True, True, True, False, False]
+    for others, leader, ends in seen[4:]:
+        starts = torch.cat([rep.floor_start(leader)[:, None], others], dim=1)
+        torch.testing.assert_close(ends, formation_end(starts, torch.ones(1, dtype=torch.bool)))
     assert np.isfinite(scene.joints).all()
 
 
@@ -765,5 +813,7 @@ def test_warm_play_and_apart_need_what_they_narrow():
         check_config_values(set_option(tiny_config(), "sflow.warm_apart=true"))
     with pytest.raises(UMFError, match="warm_clear needs"):
         check_config_values(set_option(tiny_config(), "sflow.warm_clear=0.45"))
+    with pytest.raises(UMFError, match="warm_extend needs"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_extend=true"))
     with pytest.raises(UMFError, match="warm_clear"):
         check_config_values(set_option(tiny_config(), "sflow.warm_clear=-0.1"))

@@ -5,9 +5,10 @@ of person 1: person 3 of a row on person 2's spot, a circle's six in front of pe
 warm start (:mod:`umf.warm_start`) samples such a person again from a real reaction, and
 these rules move that reaction first: a partner keeps its joints off the leader's
 (:func:`clear_of`), a walker beyond the one whose spot or body it lands on (:func:`beyond`),
-anyone else turned about person 1 to a free bearing (:func:`turned_free`).
-:func:`crowded` reads where people start, :func:`touches` their whole bodies, every frame
-(``sflow.warm_clear``).
+anyone else turned about person 1 to a free bearing (:func:`turned_free`). With
+``sflow.warm_extend`` a walker of a formation starts where :func:`formation_end` says, the
+next place in the row or file that persons 1 and 2 began. :func:`crowded` reads where
+people start, :func:`touches` their whole bodies, every frame (``sflow.warm_clear``).
 """
 
 from __future__ import annotations
@@ -98,6 +99,23 @@ def beyond(features: Tensor, others: Tensor, bodies: Tensor | None = None,
             if not bool(hit.any()):
                 break
     return features
+
+
+def formation_end(starts: Tensor, with_leader: Tensor) -> Tensor:
+    """(B, 2) where person k of a formation starts: person k - 1's start moved by person 2's
+    offset from person 1 along its larger axis (each does to the one before what person 2
+    does to person 1: a row goes on sideways, a file backwards), from ``starts`` (B, k - 1,
+    2: where people 1..k - 1 start, person 1's frame, facing +Z); NaN for rows whose person
+    2 does not travel with person 1 (``with_leader`` (B,)), who began no formation. The
+    first pass of a person k >= 3 (the S-Flow learned pairs only) lands beside person 1 on
+    either side, so a row of people who all walk together came out in no order; the whole
+    offset of a person 2 a little behind sent person 5 of a row 4 m back
+    (results/umf-small-bandai-20261217)."""
+    step = starts[:, 1] - starts[:, 0]
+    sideways = step[:, 0].abs() >= step[:, 1].abs()
+    step = torch.stack([step[:, 0] * sideways, step[:, 1] * ~sideways], dim=-1)
+    end = starts[:, -1] + step
+    return torch.where(with_leader[:, None], end, torch.full_like(end, float("nan")))
 
 
 def crowded(features: Tensor, others: Tensor, spot: float = SPOT) -> Tensor:

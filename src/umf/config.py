@@ -228,21 +228,21 @@ class SFlowConfig:
     # compares the bank with person 1's velocity instead: people walking or running together
     # keep the leader's pace and heading, where the first pass lags and drifts outwards
     warm_together: float = 0.0
-    # with warm_together: the reaction retrieved for a row travelling with person 1 is played
-    # at person 1's pace (umf.data.extension.played_at: resampled in time, its gait carried
-    # on) and taken whatever its own pace, moved sideways to keep its joints 0.4 m from the
-    # leader's, at most 1.3 m out (umf.clearance.clear_of): the bank's real partners are
-    # slower than the P-Flow's runners, and within warm_pace a partner 15 % slow still fits
+    # with warm_together: a reaction retrieved for a row travelling with person 1 is played at
+    # person 1's pace (data.extension.played_at: resampled, its gait carried on), taken at any
+    # own pace, moved sideways to keep its joints 0.4 m from the leader's, at most 1.3 m out
+    # (clearance.clear_of): real partners are slower than the P-Flow's runners
     warm_play: bool = False
-    # person k >= 3 keeps off where people 2..k - 1 start (umf.reaction_bank.SPOT): one
-    # travelling with person 1 is moved beyond the one whose spot it lands on (a row, a
-    # single file: umf.clearance.beyond), anyone else retrieved away from them and turned
-    # about person 1 to a free bearing (an audience: turned_free); the S-Flow, trained on
-    # pairs, puts every added person where it would put a partner of person 1
-    # (results/reactions-20261208); warm_clear > 0: also off the bodies of people 1..k - 1,
-    # every joint, every frame (m; umf.clearance.touches)
+    # person k >= 3 keeps off where people 2..k - 1 start (reaction_bank.SPOT), where the
+    # S-Flow, trained on pairs, puts a partner of person 1 (results/reactions-20261208): one
+    # travelling with person 1 moved beyond the one whose spot it takes (clearance.beyond),
+    # anyone else retrieved away and turned to a free bearing (turned_free); warm_clear > 0:
+    # also off the bodies of people 1..k - 1, every joint, every frame (m; touches);
+    # warm_extend: one travelling with person 1 where person 2 does too starts where
+    # person k - 1 does moved by person 2's offset from person 1 (formation_end)
     warm_apart: bool = False
     warm_clear: float = 0.0
+    warm_extend: bool = False
     warm_shortlist: int = 0  # > 0: retrieve among the reactions whose captions best fit
     # with a shortlist: for a prompt naming a side, only reactions whose captions are at least
     # as near it as its mirror image (side words swapped): people on the side it names

@@ -150,6 +150,9 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if sflow.warm_clear and not sflow.warm_apart:
             raise UMFError("sflow.warm_clear needs sflow.warm_apart (it keeps the same people "
                            "apart, over their whole bodies)")  # fmt: skip
+        if sflow.warm_extend and not (sflow.warm_apart and sflow.warm_together):
+            raise UMFError("sflow.warm_extend needs sflow.warm_apart and sflow.warm_together "
+                           "> 0 (it places people who travel with person 1)")  # fmt: skip
         if sflow.warm_start_group and not sflow.warm_start:
             raise UMFError("sflow.warm_start_group needs sflow.warm_start > 0 (it is the "
                            "same second pass's time beside 2+ people)")  # fmt: skip

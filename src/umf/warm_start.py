@@ -65,7 +65,7 @@ from typing import Any
 
 import torch
 
-from umf.clearance import beyond, clear_of, crowded, touches, turned_free
+from umf.clearance import beyond, clear_of, crowded, formation_end, touches, turned_free
 from umf.config import MULTI_PERSON, SINGLE_PERSON
 from umf.data.extension import played_at
 from umf.data.relations import ONSET_SMOOTHING, SIDE_MARGIN, action_onset
@@ -80,6 +80,7 @@ from umf.representation import (
     hold_to_length,
     joints_to_rot6d,
     leader_frame,
+    place_features,
     shift_in_time,
     transform_features,
 )
@@ -184,6 +185,7 @@ def proposal(
     leader: Tensor | None = None,
     others: Tensor | None = None,
     bodies: Tensor | None = None,
+    ends: Tensor | None = None,
 ) -> tuple[Tensor, int, Tensor, tuple[Tensor, list[int]] | None]:
     """The proposal for the first pass's reaction ``first`` (B, p, r), ``decoded`` (B, T, 262)
     as the pipeline decodes people 2..N: its latent (B, p, r) on the VAE's scale, the NFE it
@@ -220,6 +222,11 @@ def proposal(
         # side since 20261208, more surely than warm_side's caption shortlist, which also
         # holds reactions whose captions name none (results/umf-small-bandai-20261211)
         stand = None if together is None else start_side(decoded) * together
+        extend = None  # sflow.warm_extend: rows of a formation, retrieved on its side
+        if ends is not None and together is not None:
+            extend = together & torch.isfinite(ends).all(dim=-1)
+            x = torch.nan_to_num(ends[:, 0])
+            stand = torch.where(extend, torch.sign(x) * (x.abs() > SIDE_MARGIN), stand)
         bank, frames = pipe.reactions, decoded.shape[1]
         # person k >= 3 keeps off people 2..k - 1: one travelling with person 1 is moved
         # beyond them below (:func:`beyond`), everybody else retrieved away from them
@@ -246,6 +253,11 @@ def proposal(
                 reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
                 reaction = clear_of(reaction, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
+            if extend is not None and bool(extend[rows].any()):  # the formation's next place
+                go = extend[rows]
+                shift = torch.nan_to_num(ends[rows] - floor_start(reaction)) * go[:, None]
+                reaction = place_features(reaction, 0.0, shift[:, 0], shift[:, 1])
+                changed = changed | go
             if others is not None:  # on someone's spot (or body): beyond them
                 moved = beyond(reaction, others[rows], None if bodies is None
                                else bodies[rows], cfg.warm_clear)  # fmt: skip
@@ -436,11 +448,17 @@ def sample_added(
                   if cfg.warm_together > 0 else None)  # fmt: skip
         # for person k >= 3: where people 2..k - 1 start (sflow.warm_apart) and their joints
         # (sflow.warm_clear), and whether the first pass touches anyone, person 1 too
-        others = bodies = touching = None
+        others = bodies = touching = ends = None
         if cfg.warm_apart and prev.shape[1] > 1:
             b, n = prev.shape[:2]
             there = pipe.decode(prev[:, 1:].flatten(0, 1), frames, reaction=True)
             others = floor_start(there).reshape(b, n - 1, 2)
+            if cfg.warm_extend and leader is not None:  # person 2 began a row or a file?
+                second = there.reshape(b, n - 1, frames, -1)[:, 0]
+                fps = pipe.config.fps
+                began = travels_with(floor_velocity(second, fps), floor_velocity(leader, fps),
+                                     cfg.warm_together)  # fmt: skip
+                ends = formation_end(torch.cat([floor_start(leader)[:, None], others], 1), began)
             if cfg.warm_clear > 0:
                 bodies = features_to_joints(there).reshape(b, n - 1, frames, 22, 3)
                 first = leader if leader is not None else pipe.decode(
@@ -450,7 +468,7 @@ def sample_added(
         guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
                                        pflow_guidance, own, mirror=mirror,
                                        answers_first=answers_first, leader=leader,
-                                       others=others, bodies=bodies)  # fmt: skip
+                                       others=others, bodies=bodies, ends=ends)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         turned = torch.zeros_like(answer)
         if others is not None:  # people not travelling with person 1 turn to a free bearing
@@ -478,5 +496,9 @@ def sample_added(
             take = take | (fits & crowded(decoded, others))
         if touching is not None:  # a first pass on someone's body at any frame, fitting or not
             take = take | touching
+        if ends is not None:  # a walker of a formation takes its place there, wherever it was
+            together = together_rows(pipe, decoded, leader)
+            if together is not None:
+                take = take | (together & torch.isfinite(ends).all(dim=-1))
         w = torch.where(take[:, None, None], again, w)
     return w, nfe
