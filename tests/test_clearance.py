@@ -17,6 +17,7 @@ from umf.clearance import (
     touches,
     turned_free,
 )
+from umf.reaction_bank import SPOT
 from umf.representation import assemble_features, features_to_joints, place_features
 
 pytestmark = pytest.mark.usefixtures("one_thread")
@@ -146,16 +147,18 @@ def test_turned_free_falls_back_to_the_start_rule_where_no_bearing_clears():
     torch.testing.assert_close(out, row)
 
 
-def test_formation_end_goes_on_as_person_2_began():
-    """A row goes on sideways by person 2's offset from person 1, a file backwards, each
-    along that offset's larger axis only, from person k - 1's start (not person 1's);
-    nobody's formation where person 2 did not travel with person 1."""
-    row = torch.tensor([[[0.0, 0.1], [0.9, -0.3], [1.7, 0.0]]])  # people 1..3 beside
+def test_formation_end_goes_on_behind_as_person_2_began():
+    """A file goes on backwards by as far as person 2 started behind person 1, from person
+    k - 1's start (not person 1's), at least ``SPOT``; a row (person 2 more beside than
+    behind), a person 2 ahead, or one not travelling with person 1 begin none."""
     yes = torch.tensor([True])
-    torch.testing.assert_close(formation_end(row, yes), torch.tensor([[2.6, 0.0]]))
-    torch.testing.assert_close(formation_end(row[:, :2], yes), torch.tensor([[1.8, -0.3]]))
-    file = torch.tensor([[[0.1, 0.0], [-0.4, -2.0]]])  # person 2 behind person 1
-    torch.testing.assert_close(formation_end(file, yes), torch.tensor([[-0.4, -4.0]]))
-    both = torch.cat([row[:, :2], file])
-    got = formation_end(both, torch.tensor([False, True]))
-    assert torch.isnan(got[0]).all() and torch.equal(got[1], torch.tensor([-0.4, -4.0]))
+    file = torch.tensor([[[0.1, 0.0], [-0.4, -2.0], [0.3, -3.9]]])  # people 1..3
+    torch.testing.assert_close(formation_end(file, yes), torch.tensor([[0.3, -5.9]]))
+    torch.testing.assert_close(formation_end(file[:, :2], yes), torch.tensor([[-0.4, -4.0]]))
+    tight = torch.tensor([[[0.0, 0.0], [0.2, -0.5]]])  # at least SPOT: off their spot
+    torch.testing.assert_close(formation_end(tight, yes), torch.tensor([[0.2, -0.5 - SPOT]]))
+    row = torch.tensor([[[0.0, 0.0], [0.9, -0.3]]])
+    ahead = torch.tensor([[[0.0, 0.0], [0.1, 1.5]]])
+    for starts in (row, ahead):
+        assert torch.isnan(formation_end(starts, yes)).all()
+    assert torch.isnan(formation_end(file, torch.tensor([False]))).all()

@@ -567,10 +567,10 @@ def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch
     assert np.isfinite(scene.joints).all()
 
 
-def test_warm_extend_gives_person_k_where_the_formation_goes_on(models, monkeypatch):
-    """With ``sflow.warm_extend`` the proposal for person k >= 3 gets where the formation of
-    people 1..k - 1 goes on: person k - 1's start moved by person 2's offset from person 1
-    (all as decoded from the context); person 2's gets none, nor anyone's without it."""
+def test_warm_extend_gives_person_k_where_the_file_goes_on(models, monkeypatch):
+    """With ``sflow.warm_extend`` the proposal for person k >= 3 gets where the single file
+    of people 1..k - 1 goes on (:func:`formation_end` of their starts, as decoded from the
+    context); person 2's gets none, nor anyone's without it."""
     import umf.warm_start
     from umf.clearance import formation_end
 
@@ -598,7 +598,8 @@ def test_warm_extend_gives_person_k_where_the_formation_goes_on(models, monkeypa
     assert [ends is None for _, _, ends in seen] == [True, True, True, True, False, False]
     for others, leader, ends in seen[4:]:
         starts = torch.cat([rep.floor_start(leader)[:, None], others], dim=1)
-        torch.testing.assert_close(ends, formation_end(starts, torch.ones(1, dtype=torch.bool)))
+        want = formation_end(starts, torch.ones(1, dtype=torch.bool))
+        torch.testing.assert_close(ends, want, equal_nan=True)
     assert np.isfinite(scene.joints).all()
 
 

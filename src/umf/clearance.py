@@ -6,8 +6,8 @@ warm start (:mod:`umf.warm_start`) samples such a person again from a real react
 these rules move that reaction first: a partner keeps its joints off the leader's
 (:func:`clear_of`), a walker beyond the one whose spot or body it lands on (:func:`beyond`),
 anyone else turned about person 1 to a free bearing (:func:`turned_free`). With
-``sflow.warm_extend`` a walker of a formation starts where :func:`formation_end` says, the
-next place in the row or file that persons 1 and 2 began. :func:`crowded` reads where
+``sflow.warm_extend`` a walker of a single file starts where :func:`formation_end` says,
+the next place in the file that persons 1 and 2 began. :func:`crowded` reads where
 people start, :func:`touches` their whole bodies, every frame (``sflow.warm_clear``).
 """
 
@@ -102,20 +102,21 @@ def beyond(features: Tensor, others: Tensor, bodies: Tensor | None = None,
 
 
 def formation_end(starts: Tensor, with_leader: Tensor) -> Tensor:
-    """(B, 2) where person k of a formation starts: person k - 1's start moved by person 2's
-    offset from person 1 along its larger axis (each does to the one before what person 2
-    does to person 1: a row goes on sideways, a file backwards), from ``starts`` (B, k - 1,
-    2: where people 1..k - 1 start, person 1's frame, facing +Z); NaN for rows whose person
-    2 does not travel with person 1 (``with_leader`` (B,)), who began no formation. The
-    first pass of a person k >= 3 (the S-Flow learned pairs only) lands beside person 1 on
-    either side, so a row of people who all walk together came out in no order; the whole
-    offset of a person 2 a little behind sent person 5 of a row 4 m back
-    (results/umf-small-bandai-20261217)."""
+    """(B, 2) where person k of a single file starts: ``SPOT`` or more behind person k - 1,
+    as far as person 2 started behind person 1 (each does to the one before what person 2
+    does to person 1), from ``starts`` (B, k - 1, 2: where people 1..k - 1 start, person
+    1's frame, facing +Z). NaN for rows whose person 2 does not travel with person 1
+    (``with_leader`` (B,)) or walks beside them more than behind: a row is left to
+    :func:`beyond`. The first pass of a person k >= 3 (the S-Flow learned pairs only) lands
+    anywhere near person 1, and a file came out of order; a row placed the same way
+    sideways was pulled back in by the VAE (a reaction 2.5 m out decoded 2.1 m out) and by
+    the second pass, and touched more (results/umf-small-bandai-20261217)."""
     step = starts[:, 1] - starts[:, 0]
-    sideways = step[:, 0].abs() >= step[:, 1].abs()
-    step = torch.stack([step[:, 0] * sideways, step[:, 1] * ~sideways], dim=-1)
-    end = starts[:, -1] + step
-    return torch.where(with_leader[:, None], end, torch.full_like(end, float("nan")))
+    behind = step[:, 1] < -step[:, 0].abs()
+    end = starts[:, -1] + torch.stack(
+        [torch.zeros_like(step[:, 1]), step[:, 1].clamp_max(-SPOT)], -1
+    )
+    return torch.where((with_leader & behind)[:, None], end, torch.full_like(end, float("nan")))
 
 
 def crowded(features: Tensor, others: Tensor, spot: float = SPOT) -> Tensor:

@@ -238,8 +238,8 @@ class SFlowConfig:
     # travelling with person 1 moved beyond the one whose spot it takes (clearance.beyond),
     # anyone else retrieved away and turned to a free bearing (turned_free); warm_clear > 0:
     # also off the bodies of people 1..k - 1, every joint, every frame (m; touches);
-    # warm_extend: one travelling with person 1 where person 2 does too starts where
-    # person k - 1 does moved by person 2's offset from person 1 (formation_end)
+    # warm_extend: one travelling with person 1 behind whom person 2 does starts behind
+    # person k - 1 as far as person 2 did behind person 1 (a file; formation_end)
     warm_apart: bool = False
     warm_clear: float = 0.0
     warm_extend: bool = False

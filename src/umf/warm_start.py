@@ -45,7 +45,10 @@ later on the path it keeps more of its proposal, which ``sflow.warm_apart`` plac
 them (results/umf-small-bandai-20261214). ``sflow.warm_clear`` c > 0 keeps them off
 everybody's whole body, every joint c away at every frame (:mod:`umf.clearance`): a first
 pass that touches someone is sampled again, from itself moved where no real reaction at its
-pace was found (results/umf-small-bandai-20261215).
+pace was found (results/umf-small-bandai-20261215). ``sflow.warm_extend`` starts a walker of
+a single file (person 2 behind person 1, both travelling) behind person k - 1, as far as
+person 2 started behind person 1 (:func:`umf.clearance.formation_end`), and takes that pass
+(results/umf-small-bandai-20261217).
 
 ``sflow.own_warm`` > 0 treats a person 2..N given an own prompt apart: sampled again from
 that time towards the P-Flow's single-person motion for the own prompt alone
@@ -222,7 +225,7 @@ def proposal(
         # side since 20261208, more surely than warm_side's caption shortlist, which also
         # holds reactions whose captions name none (results/umf-small-bandai-20261211)
         stand = None if together is None else start_side(decoded) * together
-        extend = None  # sflow.warm_extend: rows of a formation, retrieved on its side
+        extend = None  # sflow.warm_extend: walkers of a single file, retrieved on its side
         if ends is not None and together is not None:
             extend = together & torch.isfinite(ends).all(dim=-1)
             x = torch.nan_to_num(ends[:, 0])
@@ -253,7 +256,7 @@ def proposal(
                 reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
                 reaction = clear_of(reaction, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
-            if extend is not None and bool(extend[rows].any()):  # the formation's next place
+            if extend is not None and bool(extend[rows].any()):  # the file's next place
                 go = extend[rows]
                 shift = torch.nan_to_num(ends[rows] - floor_start(reaction)) * go[:, None]
                 reaction = place_features(reaction, 0.0, shift[:, 0], shift[:, 1])
@@ -261,6 +264,8 @@ def proposal(
             if others is not None:  # on someone's spot (or body): beyond them
                 moved = beyond(reaction, others[rows], None if bodies is None
                                else bodies[rows], cfg.warm_clear)  # fmt: skip
+                if extend is not None:  # a file's next place is off everyone's spot already
+                    moved = torch.where(extend[rows][:, None, None], reaction, moved)
                 changed = changed | (moved != reaction).any(dim=2).any(dim=1)
                 reaction = moved
             if bool(changed.any()):
@@ -453,7 +458,7 @@ def sample_added(
             b, n = prev.shape[:2]
             there = pipe.decode(prev[:, 1:].flatten(0, 1), frames, reaction=True)
             others = floor_start(there).reshape(b, n - 1, 2)
-            if cfg.warm_extend and leader is not None:  # person 2 began a row or a file?
+            if cfg.warm_extend and leader is not None:  # person 2 began a single file?
                 second = there.reshape(b, n - 1, frames, -1)[:, 0]
                 fps = pipe.config.fps
                 began = travels_with(floor_velocity(second, fps), floor_velocity(leader, fps),
@@ -496,7 +501,7 @@ def sample_added(
             take = take | (fits & crowded(decoded, others))
         if touching is not None:  # a first pass on someone's body at any frame, fitting or not
             take = take | touching
-        if ends is not None:  # a walker of a formation takes its place there, wherever it was
+        if ends is not None:  # a walker of a file takes its place there, wherever it was
             together = together_rows(pipe, decoded, leader)
             if together is not None:
                 take = take | (together & torch.isfinite(ends).all(dim=-1))
