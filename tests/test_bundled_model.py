@@ -245,6 +245,23 @@ def test_a_4_second_runner_leader_runs_straight(pipe):
     assert sum(straight) >= 5, straight
 
 
+def test_a_short_single_file_of_six_walks_in_order(pipe):
+    """ "Six people walk in single file.", 1.6 s, raw, seeds 0-7: each person starts behind
+    the one before along person 1's heading in at least 7 seeds. 20261216 placed a walker
+    behind person 1 wherever its first pass drew, and 4 of 8 came out of order (the val
+    groups' single files failed `order` so); 20261217's ``sflow.warm_extend`` starts each
+    behind the one before: 8 of 8 (results/umf-small-bandai-20261217)."""
+    from umf.data.relations import lateral_offset
+
+    ordered = []
+    for seed in range(8):
+        (scene,) = pipe("Six people walk in single file.", num_people=6, seconds=1.6, seed=seed,
+                        fit=False, separate=False)  # fmt: skip
+        ahead = [float(lateral_offset(scene.joints, 0, k, 0)[1]) for k in range(1, 6)]
+        ordered.append(ahead[0] < 0 and all(np.diff(ahead) < 0))
+    assert sum(ordered) >= 7, ordered
+
+
 def test_people_3_to_n_start_off_the_spots_of_those_before_them(pipe):
     """Raw (no separation), seeds 0-3: in an audience, a single file and a row of three the
     closest two first-frame pelvises are at least 0.5 m apart, 0.8 m at the median.
