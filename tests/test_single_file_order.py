@@ -30,3 +30,13 @@ def test_in_order_needs_each_behind_the_one_before():
     assert not single_file_order.in_order([-2.0, -1.2, -3.1])  # person 3 ahead of person 2
     assert not single_file_order.in_order([0.5, -1.0])  # person 2 ahead of person 1
     assert not single_file_order.in_order([])
+
+
+def test_tracks_start_person_1_at_the_origin_heading_up():
+    """Person 1 walks up the page from the origin; a person 1 m to their left is drawn at
+    x = -1 (their left on the left), 2 m behind at y = -2."""
+    j = _file([0.0, -2.0])
+    j[1, :, :, 0] += 1.0  # person 2 one metre to person 1's left (+X when facing +Z)
+    (x1, y1), (x2, y2) = single_file_order.tracks(j)
+    np.testing.assert_allclose([x1[0], y1[0], y1[-1]], [0.0, 0.0, 1.2], atol=1e-6)
+    np.testing.assert_allclose([x2[0], y2[0]], [-1.0, -2.0], atol=1e-6)
