@@ -593,8 +593,15 @@ def test_warm_extend_gives_person_k_where_the_file_goes_on(models, monkeypatch):
         _scene(pipe, people=4)
         cfg.warm_extend = True
         scene = _scene(pipe, people=4)
+        # re-rolled: the last person goes on from the one before; one inside the file is
+        # not sent to its end
+        del seen[6:]
+        pipe.reroll(scene, 4, seed=1)
+        pipe.reroll(scene, 3, seed=1)
     finally:
         cfg.warm_apart, cfg.warm_together, cfg.warm_extend = False, 0.0, False
+    assert [ends is None for _, _, ends in seen[6:]] == [False, True]
+    del seen[6:]
     assert [ends is None for _, _, ends in seen] == [True, True, True, True, False, False]
     for others, leader, ends in seen[4:]:
         starts = torch.cat([rep.floor_start(leader)[:, None], others], dim=1)

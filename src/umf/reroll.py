@@ -112,6 +112,7 @@ def reroll_person(
             generator=scene_generators(seed, [0], device), own=person_kw,
             pflow_guidance=guidance, mirror=mirror_text(pipe, [words]),
             answers_first=k > 0,  # a re-rolled person 1 answers nobody
+            last=k == n - 1,  # a file's walker re-rolled inside it is not sent to its end
         )  # fmt: skip
         new = transform_features(pipe.decode(w, t, reaction=True)[0].cpu(), frame, inverse=True)
     decoded = features_to_joints_integrated(new).numpy()  # (T, 22, 3), one frame added

@@ -428,6 +428,7 @@ def sample_added(
     pflow_guidance: float | None,
     mirror: Any = None,
     answers_first: bool = True,
+    last: bool = True,
 ) -> tuple[Tensor, int]:
     """The next person's latent (B, p, r) and the NFE, as the pipeline and re-rolls sample
     people 2..N: the S-Flow's pass and, with ``sflow.warm_start``, the pass again from its
@@ -436,7 +437,9 @@ def sample_added(
     the person's own prompt (:func:`umf.person_prompts.person_text`); ``pflow_guidance``:
     the caller's guidance for a P-Flow proposal (None: its config's); ``mirror``:
     :func:`mirror_text` of the prompts; ``answers_first``: ``prev[:, 0]`` is person 1, whom
-    an answer waits for (False for a re-rolled person 1: nobody to wait for)."""
+    an answer waits for (False for a re-rolled person 1: nobody to wait for); ``last``:
+    the person comes after everyone in ``prev`` (False for a re-rolled person inside the
+    scene, whom ``sflow.warm_extend`` must not send to the end of a file)."""
     kw = {"steps": steps, "guidance": guidance, "generator": generator, **own}
     w, nfe = pipe.sflow.sample(prev, mask, text, uncond, **kw)
     cfg = pipe.config.sflow
@@ -458,7 +461,7 @@ def sample_added(
             b, n = prev.shape[:2]
             there = pipe.decode(prev[:, 1:].flatten(0, 1), frames, reaction=True)
             others = floor_start(there).reshape(b, n - 1, 2)
-            if cfg.warm_extend and leader is not None:  # person 2 began a single file?
+            if cfg.warm_extend and last and leader is not None:  # person 2 began a file?
                 second = there.reshape(b, n - 1, frames, -1)[:, 0]
                 fps = pipe.config.fps
                 began = travels_with(floor_velocity(second, fps), floor_velocity(leader, fps),
