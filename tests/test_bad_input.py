@@ -271,6 +271,12 @@ CASES = [
     ([*T, "--set", "train_pflow.labels=[1]"], 1, "train_pflow.labels must be a list of words"),
     ([*T, "--set", "train_pflow.labels=wave"], 1, "train_pflow.labels must be a list"),
     ([*T, "--set", "train_sflow.labels=[wave]"], 1, "train_sflow.labels: only the VAE and P-Flow"),
+    (
+        [*T, "--set", "train_sflow.label_repeats=[wave=2]"],
+        1,
+        "train_sflow.label_repeats: only the VAE and P-Flow",
+    ),
+    ([*T, "--set", "train_pflow.label_repeats=[wave]"], 1, "label_repeats takes key=value pairs"),
     ([*T, "--set", "sflow.reaction_noise=-0.5"], 1, "sflow.reaction_noise must be between 0 and"),
     (
         [*T, "--set", "train_pflow.respell_captions=maybe"],

@@ -243,6 +243,34 @@ def test_single_dataset_balance_repeats_rare_labels(corpus, monkeypatch):
             D.SingleMotionDataset(corpus, "train", None, balance=bad)
 
 
+def test_single_dataset_label_times_repeat_those_labels_after_balance(corpus, monkeypatch):
+    """``train_*.label_repeats``: items of the named labels that many times more, on top of
+    ``balance_labels``; other labels as they were."""
+    clips = [c for c in corpus.split_clips("train") if c.num_people == 1]
+    for clip in clips[:6]:
+        monkeypatch.setitem(clip.meta, "content", "common")
+    monkeypatch.setitem(clips[6].meta, "content", "jump")
+    monkeypatch.setitem(clips[7].meta, "content", "crawl")
+    plain = D.SingleMotionDataset(corpus, "train", None, 20, 60, balance=1.0)
+    ds = D.SingleMotionDataset(corpus, "train", None, 20, 60, balance=1.0,
+                               label_times={"jump": 3, "roll": 5})  # fmt: skip
+    ids = [clip.id for clip, _, _ in ds.items]
+    assert ids.count(clips[6].id) == 3 * 6  # balanced to six, then three times that
+    assert ids.count(clips[7].id) == 6 and ids.count(clips[0].id) == 1
+    assert len(ds) == len(plain) + 2 * 6
+
+
+def test_label_repeats_are_checked_as_label_times():
+    from conftest import tiny_config
+    from umf.config import set_option
+    from umf.model_checks import check_config_values
+
+    check_config_values(set_option(tiny_config(), "train_pflow.label_repeats=[jump=4]"))
+    for bad in ("[jump]", "[jump=0]", "[jump=x]"):
+        with pytest.raises(UMFError, match="label_repeats"):
+            check_config_values(set_option(tiny_config(), f"train_pflow.label_repeats={bad}"))
+
+
 def test_single_dataset_labels_keep_only_those_clips(corpus, monkeypatch):
     for clip in corpus.clips:
         monkeypatch.setitem(clip.meta, "content", "walk")

@@ -374,18 +374,18 @@ class TrainConfig:
     # trained on them) fixed; needs a VAE to start from (`umf train vae --init MODEL`)
     decoder_only: bool = False
     # scene batches (VAE, P-Flow dataset 1, S-Flow): each real multi-person clip (a take
-    # captured together, e.g. CMU salsa) appears this many times per epoch, each with its own
-    # crop, beside the composed scenes: a dozen real takes among 3,000 composed scenes are
-    # otherwise seen in a fraction of a percent of the batches
+    # captured together, e.g. CMU salsa) appears this many times per epoch, each its own crop,
+    # beside the composed scenes: a dozen takes among 3,000 scenes are otherwise rarely seen
     real_repeats: int = 1
     # scene batches: composed scenes of these relations appear this many times per epoch,
     # "relation=times" (e.g. stand_facing=4: the scenes whose actions only the per-person
-    # captions name, one relation of 13 otherwise)
+    # captions name, one relation of 13 otherwise); label_repeats: single-person items of
+    # these content labels that many times more, after balance_labels (e.g. jump=4)
     relation_repeats: tuple[str, ...] = ()
+    label_repeats: tuple[str, ...] = ()
     # VAE fine-tuned with --init: refit the body-frame statistics on this corpus (balanced as
-    # training draws it) and restate the VAE's weights so it computes the same function
-    # (umf.models.vae.MotionVAE.restate_body): a library of motions the model never saw (a
-    # crawl, a backflip) is then a few deviations from the mean instead of tens
+    # training draws it) and restate the VAE's weights to compute the same function
+    # (models.vae.MotionVAE.restate_body): a crawl, a backflip are then a few deviations
     refit_body: bool = False
     # S-Flow only: weight of the loss on the decoded reaction's feet (m/frame they slide
     # where the real reaction's are planted; umf.train.foot_slide), on flow times from

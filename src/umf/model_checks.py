@@ -72,6 +72,10 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             from umf.config import metadata_pairs
 
             metadata_pairs(value, where)
+        if name == "label_repeats":  # the labels themselves are the corpus's to say
+            from umf.config import relation_repeats
+
+            relation_repeats(value, where)
         if name == "relation_repeats":
             from umf.config import relation_repeats
             from umf.data.scene_relations import RELATIONS

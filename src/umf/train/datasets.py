@@ -274,6 +274,7 @@ class SingleMotionDataset(_EpochDataset):
         caption_mix: float = 0.0,
         caption_mix_within: Sequence[str] = ("content", "style"),
         caption_mix_from: Sequence[str] = (),
+        label_times: Mapping[str, int] | None = None,
     ) -> None:
         super().__init__(seed)
         _check_frames(min_frames, max_frames)
@@ -312,6 +313,9 @@ class SingleMotionDataset(_EpochDataset):
             self.items = [
                 item for item, r in zip(self.items, repeats, strict=True) for _ in range(r)
             ]
+        if label_times:  # these labels that many times more (train_*.label_repeats)
+            times = [label_times.get(clip.meta.get("content"), 1) for clip, _, _ in self.items]
+            self.items = [item for item, r in zip(self.items, times, strict=True) for _ in range(r)]
         # the captioned clips of each group (content label, style ...), for caption_mix
         self.mix_within = tuple(caption_mix_within)
         mix_from = metadata_pairs(caption_mix_from)

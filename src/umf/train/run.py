@@ -74,17 +74,19 @@ def check_run_config(cfg: UMFConfig) -> None:
 
     check_model_config(cfg)
     for stage in (*STAGES, "evaluator"):
+        t = getattr(cfg, f"train_{stage}")
         try:
-            check_train_config(getattr(cfg, f"train_{stage}"))
+            check_train_config(t)
         except UMFError as exc:
             raise UMFError(f"train_{stage}: {exc}") from exc
-        if stage != "vae" and getattr(cfg, f"train_{stage}").decoder_only:
+        if stage != "vae" and t.decoder_only:
             raise UMFError(f"train_{stage}.decoder_only: only the VAE stage has a decoder to "
                            "fine-tune alone")  # fmt: skip
-        if stage in ("sflow", "evaluator") and getattr(cfg, f"train_{stage}").labels:
-            raise UMFError(f"train_{stage}.labels: only the VAE and P-Flow train on "
-                           "single-person clips, which have one content label each")  # fmt: skip
-        if stage != "pflow" and getattr(cfg, f"train_{stage}").repeat_leader_gait:
+        for name in ("labels", "label_repeats"):
+            if stage in ("sflow", "evaluator") and getattr(t, name):
+                raise UMFError(f"train_{stage}.{name}: only the VAE and P-Flow train on "
+                               "single-person clips, with one content label each")  # fmt: skip
+        if stage != "pflow" and t.repeat_leader_gait:
             raise UMFError(f"train_{stage}.repeat_leader_gait: only the P-Flow (person 1)")
 
 
@@ -121,12 +123,12 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         common = dict(mirror=train, seed=t.seed, respell=train and t.respell_captions, **frames)
         if kind == "single":
             place = train and stage == "vae"
+            more = relation_repeats(t.label_repeats, "label_repeats") if train else None
             # hold_rest / repeat_gait / settle define the target, so validation is extended too
             ds = SingleMotionDataset(corpus, split, normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
                                      hold_rest=t.hold_rest, repeat_gait=t.repeat_gait,
-                                     settle=t.settle,
-                                     labels=t.labels,
+                                     settle=t.settle, labels=t.labels, label_times=more,
                                      caption_mix=t.caption_mix if train else 0.0,
                                      caption_mix_within=t.caption_mix_within,
                                      caption_mix_from=t.caption_mix_from,
@@ -174,13 +176,10 @@ def bank_device(launch: Launch) -> str:
 
 def body_normalizer(corpus: Corpus, radius: float, max_frames: int = 100_000, seed: int = 0,
                     balance: float = 0.0):  # fmt: skip
-    """Body-frame statistics (:func:`umf.body_frame.fit_body_normalizer`) of train clips.
-
-    Clips are visited in a seeded order until ``max_frames`` frames are seen; the
-    trajectory slots account for the random placement of VAE training within ``radius``.
-    ``balance``: clips of rare content labels count as often as training draws them
-    (``train_*.balance_labels``, :func:`umf.train.datasets.label_repeats`).
-    """
+    """Body-frame statistics (:func:`umf.body_frame.fit_body_normalizer`) of train clips,
+    visited in a seeded order until ``max_frames`` frames are seen; the trajectory slots
+    account for the random placement of VAE training within ``radius``. ``balance``: clips
+    of rare content labels count as often as training draws them (``balance_labels``)."""
     import numpy as np
 
     from umf.body_frame import fit_body_normalizer
@@ -376,8 +375,8 @@ def train_stage(
         cfg = dataclasses.replace(cfg, text=dataclasses.replace(cfg.text, respell=respell))
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
-    if t.labels:  # before anything is written: a typo must not stay in the run's config
-        check_labels(corpus, t.labels)
+    if t.labels or t.label_repeats:  # before anything is written: a typo must not stay
+        check_labels(corpus, [*t.labels, *relation_repeats(t.label_repeats, "label_repeats")])
     if stage == "vae" and t.decoder_only and init is None and not resuming:
         raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
     if stage == "vae" and init is not None and not t.decoder_only and not own_vae:
