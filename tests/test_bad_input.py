@@ -276,7 +276,11 @@ CASES = [
         1,
         "train_sflow.label_repeats: only the VAE and P-Flow",
     ),
-    ([*T, "--set", "train_pflow.label_repeats=[wave]"], 1, "label_repeats takes key=value pairs"),
+    (
+        [*T, "--set", "train_pflow.label_repeats=[wave]"],
+        1,
+        "label_repeats takes key=value pairs (e.g. jump=4)",
+    ),
     ([*T, "--set", "sflow.reaction_noise=-0.5"], 1, "sflow.reaction_noise must be between 0 and"),
     (
         [*T, "--set", "train_pflow.respell_captions=maybe"],

@@ -581,8 +581,7 @@ def family_config(name: str) -> UMFConfig:
 
 
 def relation_repeats(values: Sequence[str], where: str = "relation_repeats") -> dict[str, int]:
-    """``["stand_facing=4", ...]`` as {relation: times}; a one-line error for anything else
-    (the config check and the dataset both read the option through this)."""
+    """``["stand_facing=4", ...]`` as {key: times}; one error line for anything else."""
     out = {}
     for key, value in metadata_pairs(values, where):
         if not value.isdigit() or not 1 <= int(value) <= 1000:
@@ -592,9 +591,10 @@ def relation_repeats(values: Sequence[str], where: str = "relation_repeats") -> 
 
 
 def metadata_pairs(values: Sequence[str], where: str = "caption_mix_from") -> list[list[str]]:
-    """``["style=normal", ...]`` as [key, value] pairs; a one-line error for anything else
-    (the config check and the dataset both read the option through this)."""
+    """``["style=normal", ...]`` as [key, value] pairs; one error line for anything else."""
     pairs = [v.split("=", 1) for v in values]
     if any(len(pair) != 2 or not pair[0] for pair in pairs):
-        raise UMFError(f"{where} takes key=value pairs (e.g. style=normal), got {list(values)}")
+        eg = {"label_repeats": "jump=4", "relation_repeats": "stand_facing=4"}
+        eg = eg.get(where.split(".")[-1], "style=normal")
+        raise UMFError(f"{where} takes key=value pairs (e.g. {eg}), got {list(values)}")
     return pairs
