@@ -13,7 +13,9 @@ CORPUS``: how far each couple is from the training takes, its mean per-joint dis
 the nearest crop of the model's bank (both people as the pipeline decodes them, in person
 1's frame), beside the real test and val takes' first 4 s against the same crops: a couple
 finished from a crop stays near it, a new real couple does not. ``--json FILE``: every
-seed's statistics, for ``research/salsa_figure.py``.
+seed's statistics, for ``research/salsa_figure.py``. ``--real-crops CORPUS``: how many 4 s
+crops of the real salsa takes (every 30 frames) pass the same targets, take by take and per
+split: real couples dance apart too, so "every seed passes" is more than real salsa does.
 """
 
 from __future__ import annotations
@@ -71,6 +73,13 @@ def nearest_crop(joints: np.ndarray, crops: np.ndarray) -> float:
 MEDIANS = ("hands_near", "pelvis", "facing", "penetration_cm", "penetration_frac")
 
 
+def crops_passing(joints: np.ndarray, frames: int = 121, every: int = 30) -> list[bool]:
+    """Whether each crop of ``frames`` (4 s and one), started every ``every`` frames, of a
+    real couple (2, T, 22, 3) passes the salsa targets (:func:`salsa_pass`)."""
+    starts = range(0, joints.shape[1] - frames + 1, every)
+    return [salsa_pass(closeness(joints[:2, s : s + frames])) for s in starts]
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("model", type=Path, nargs="?", default=None)
@@ -78,9 +87,23 @@ def main() -> None:
     ap.add_argument("--first", type=int, default=0)
     ap.add_argument("--warm-take", type=float, nargs="+", default=None)
     ap.add_argument("--nearest", type=Path, default=None, metavar="CORPUS")
+    ap.add_argument("--real-crops", type=Path, default=None, metavar="CORPUS")
     ap.add_argument("--json", type=Path, default=None, help="every seed's statistics, per "
                     "warm_take (research/salsa_figure.py draws them)")  # fmt: skip
     args = ap.parse_args()
+
+    if args.real_crops is not None:
+        from umf.data.corpus import Corpus
+
+        split: dict[str, list[bool]] = {}
+        for c in Corpus.load(args.real_crops).clips:
+            if c.meta.get("content") == "salsa":
+                got = crops_passing(c.joints)
+                split.setdefault(c.split, []).extend(got)
+                print(f"{c.id} ({c.split}): {sum(got)} of {len(got)} 4 s crops pass")
+        for name, got in sorted(split.items()):
+            print(f"{name}: {sum(got)} of {len(got)} ({np.mean(got):.0%})")
+        return
 
     if args.nearest is not None:
         from umf.data.corpus import Corpus
