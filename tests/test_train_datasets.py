@@ -815,7 +815,7 @@ def test_own_caption_present_share_and_empty_clips():
 
 
 def test_relation_repeats_serve_a_relations_scenes_more_often(corpus):
-    from umf.config import relation_repeats
+    from umf.config import key_times
 
     base = D.SceneDataset(corpus, "train", None, 20, 80, real_clips=False)
     rel = corpus.scenes["train"][0]["relation"]
@@ -824,10 +824,10 @@ def test_relation_repeats_serve_a_relations_scenes_more_often(corpus):
     count = sum(r["relation"] == rel for r in corpus.scenes["train"])
     assert len(more) == len(base) + 2 * count
     assert sum(it[1]["relation"] == rel for it in more.items) == 3 * count
-    assert relation_repeats(["stand_facing=4"]) == {"stand_facing": 4}
+    assert key_times(["stand_facing=4"]) == {"stand_facing": 4}
     for bad in (["stand_facing"], ["stand_facing=0"], ["stand_facing=x"]):
         with pytest.raises(UMFError, match="relation_repeats"):
-            relation_repeats(bad)
+            key_times(bad)
 
 
 # --------------------------------------------------------------------- scenes carried on

@@ -580,7 +580,7 @@ def family_config(name: str) -> UMFConfig:
     raise UMFError(f"unknown config family {name!r} (choose paper or small)")
 
 
-def relation_repeats(values: Sequence[str], where: str = "relation_repeats") -> dict[str, int]:
+def key_times(values: Sequence[str], where: str = "relation_repeats") -> dict[str, int]:
     """``["stand_facing=4", ...]`` as {key: times}; one error line for anything else."""
     out = {}
     for key, value in metadata_pairs(values, where):

@@ -72,15 +72,12 @@ def _check_value(where: str, kind: str, value: Any) -> None:
             from umf.config import metadata_pairs
 
             metadata_pairs(value, where)
-        if name == "label_repeats":  # the labels themselves are the corpus's to say
-            from umf.config import relation_repeats
-
-            relation_repeats(value, where)
-        if name == "relation_repeats":
-            from umf.config import relation_repeats
+        if name in ("label_repeats", "relation_repeats"):  # labels are the corpus's to say
+            from umf.config import key_times
             from umf.data.scene_relations import RELATIONS
 
-            unknown = sorted(set(relation_repeats(value, where)) - set(RELATIONS))
+            keys = set(key_times(value, where))
+            unknown = sorted(keys - set(RELATIONS)) if name == "relation_repeats" else []
             if unknown:
                 raise UMFError(f"{where}: no relation {unknown[0]!r}; relations: "
                                f"{', '.join(RELATIONS)}")  # fmt: skip

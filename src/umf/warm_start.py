@@ -479,8 +479,8 @@ def sample_added(
                                        others=others, bodies=bodies, ends=ends)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         turned = torch.zeros_like(answer)
+        together = together_rows(pipe, decoded, leader) if others is not None else None
         if others is not None:  # people not travelling with person 1 turn to a free bearing
-            together = together_rows(pipe, decoded, leader)
             free = ~together if together is not None else torch.ones_like(turned)
             if touching is not None:  # on someone's body, no real reaction at its pace: itself
                 itself = free & ~fits & ~answer & touching
@@ -504,9 +504,7 @@ def sample_added(
             take = take | (fits & crowded(decoded, others))
         if touching is not None:  # a first pass on someone's body at any frame, fitting or not
             take = take | touching
-        if ends is not None:  # a walker of a file takes its place there, wherever it was
-            together = together_rows(pipe, decoded, leader)
-            if together is not None:
-                take = take | (together & torch.isfinite(ends).all(dim=-1))
+        if ends is not None and together is not None:  # a file's walker takes its place there
+            take = take | (together & torch.isfinite(ends).all(dim=-1))
         w = torch.where(take[:, None, None], again, w)
     return w, nfe

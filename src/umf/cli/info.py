@@ -17,7 +17,6 @@ def info(
 ) -> None:  # fmt: skip
     """List the model's actions, styles and multi-person relations; score prompts."""
     from umf.cli.loading import load_pipeline
-    from umf.coverage import Vocabulary
     from umf.person_prompts import takes_person_prompts
     from umf.pipeline import default_model_dir
     from umf.validation import check_text
@@ -28,7 +27,7 @@ def info(
         raise UMFError(f"{path}: not a model directory (no config.json)")
     pipe = load_pipeline(model)  # a damaged model is said so here, not described
     config = pipe.config
-    vocab = Vocabulary.load(path)
+    vocab = pipe.vocabulary
     typer.echo(f"model: {pipe.name} ({path})")
     typer.echo(
         "per-person prompts (--person): " + ("yes" if takes_person_prompts(config) else "no")

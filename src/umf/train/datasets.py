@@ -307,15 +307,14 @@ class SingleMotionDataset(_EpochDataset):
                 )
                 if period is not None:
                     self.extended[clip.id, p] = period
-        if balance:
+        if balance or label_times:  # label_times: those labels that many times more again
             contents = [clip.meta.get("content") for clip, _, _ in self.items]
-            repeats = label_repeats(contents, balance)
+            more = label_times or {}
+            repeats = [r * more.get(c, 1) for r, c in
+                       zip(label_repeats(contents, balance), contents, strict=True)]  # fmt: skip
             self.items = [
                 item for item, r in zip(self.items, repeats, strict=True) for _ in range(r)
             ]
-        if label_times:  # these labels that many times more (train_*.label_repeats)
-            times = [label_times.get(clip.meta.get("content"), 1) for clip, _, _ in self.items]
-            self.items = [item for item, r in zip(self.items, times, strict=True) for _ in range(r)]
         # the captioned clips of each group (content label, style ...), for caption_mix
         self.mix_within = tuple(caption_mix_within)
         mix_from = metadata_pairs(caption_mix_from)

@@ -25,7 +25,7 @@ from umf.checkpoint import (
     read_weights,
     save_checkpoint,
 )
-from umf.config import TrainConfig, UMFConfig, family_config, relation_repeats, set_option
+from umf.config import TrainConfig, UMFConfig, family_config, key_times, set_option
 from umf.data.corpus import Corpus
 from umf.errors import UMFError
 from umf.io import atomic_path, write_json_atomic
@@ -123,7 +123,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
         common = dict(mirror=train, seed=t.seed, respell=train and t.respell_captions, **frames)
         if kind == "single":
             place = train and stage == "vae"
-            more = relation_repeats(t.label_repeats, "label_repeats") if train else None
+            more = key_times(t.label_repeats, "label_repeats") if train else None
             # hold_rest / repeat_gait / settle define the target, so validation is extended too
             ds = SingleMotionDataset(corpus, split, normalizer, random_placement=place,
                                      balance=t.balance_labels if train else 0.0,
@@ -139,7 +139,7 @@ def _loaders(stage: str, corpus: Corpus, cfg: UMFConfig, t: TrainConfig, vae=Non
                 split,
                 normalizer,
                 real_repeats=t.real_repeats if train else 1,
-                relation_repeats=relation_repeats(t.relation_repeats) if train else None,
+                relation_repeats=key_times(t.relation_repeats) if train else None,
                 repeat_gait=t.repeat_scene_gait,  # defines the target: validation too
                 leader_gait=t.repeat_leader_gait,
                 **common,
@@ -376,7 +376,7 @@ def train_stage(
     t = _train_cfg(cfg, stage, max_steps)
     check_train_config(t)
     if t.labels or t.label_repeats:  # before anything is written: a typo must not stay
-        check_labels(corpus, [*t.labels, *relation_repeats(t.label_repeats, "label_repeats")])
+        check_labels(corpus, [*t.labels, *key_times(t.label_repeats, "label_repeats")])
     if stage == "vae" and t.decoder_only and init is None and not resuming:
         raise UMFError("train_vae.decoder_only fine-tunes a trained VAE: pass --init MODEL_DIR")
     if stage == "vae" and init is not None and not t.decoder_only and not own_vae:
