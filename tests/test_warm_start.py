@@ -539,6 +539,97 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         cfg.warm_clear = 0.0
 
 
+def test_warm_follow_carries_the_played_row_along_person_1(models, monkeypatch):
+    """With ``sflow.warm_follow`` d the played reaction of a row travelling with person 1 is
+    handed to :func:`follow_leader` with that row's leader and d, then kept clear of them; a
+    row not travelling with person 1 is not; without it (None), nobody is."""
+    import umf.warm_start
+    from umf.reaction_bank import ReactionBank
+    from umf.warm_start import proposal
+
+    pipe = models["warm"]
+    first = torch.zeros(2, *pipe.vae.latent_shape)
+    decoded = pipe.decode(first, 30, reaction=True)
+    leader = decoded.flip(0)
+
+    def velocity(f, fps):
+        if f is decoded:
+            return torch.tensor([[0.0, 1.0], [0.0, -1.0]])  # row 1 walks the other way
+        return torch.tensor([[0.0, 2.5]] * len(f))
+
+    calls = []
+
+    def spy_follow(features, lead, turn):
+        calls.append(("follow", lead.clone(), turn))
+        return features + 2.0
+
+    def spy_clear(features, lead, distance=0.4):
+        calls.append(("clear", features.clone()))
+        return features
+
+    monkeypatch.setattr(umf.warm_start, "floor_velocity", velocity)
+    monkeypatch.setattr(umf.warm_start, "play_at", lambda f, rate: f)
+    monkeypatch.setattr(umf.warm_start, "follow_leader", spy_follow)
+    monkeypatch.setattr(umf.warm_start, "clear_of", spy_clear)
+    bank = ReactionBank({30: first[:1] + 0.5}, velocities={30: torch.tensor([[0.0, 1.0]])})
+    text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
+    cfg = pipe.config.sflow
+    old = (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
+           cfg.warm_play, pipe.reactions)  # fmt: skip
+    try:
+        cfg.warm_pace, cfg.warm_proposal, cfg.warm_neighbours = 0.1, "retrieved", 1
+        cfg.warm_together, cfg.warm_play, pipe.reactions = 0.8, True, bank
+        for follow in (None, 20.0):
+            cfg.warm_follow = follow
+            gens = [torch.Generator().manual_seed(s) for s in range(2)]
+            proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
+    finally:
+        (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
+         cfg.warm_play, pipe.reactions) = old  # fmt: skip
+        cfg.warm_follow = None
+    assert [c[0] for c in calls] == ["clear", "follow", "clear"]
+    assert calls[1][2] == 20.0  # the turn beyond which a row follows
+    torch.testing.assert_close(calls[1][1], leader[:1])  # row 0's leader only
+    reaction = pipe.decode(bank.latents[30][:1], 30, reaction=True)
+    torch.testing.assert_close(calls[2][1], reaction + 2.0)  # cleared once it follows
+
+
+def test_follow_leader_turns_a_straight_walker_with_a_turning_leader():
+    """:func:`follow_leader` on features: beside a leader at its own pace it leaves the
+    walker's path as it was; beside one who turns, the walker turns the same way, where the
+    turn is over the threshold."""
+    from umf.warm_start import follow_leader
+
+    walker = _gait(True, frames=91)
+    walker[:, rep.POS] += torch.tensor([0.8, 0.0, 0.0], dtype=walker.dtype).repeat(22)
+    straight = _gait(True, frames=91)
+    same = follow_leader(walker[None], straight[None])[0]
+    torch.testing.assert_close(rep.features_to_joints(same)[:, 0],
+                               rep.features_to_joints(walker)[:, 0], atol=0.03, rtol=0)  # fmt: skip
+    joints = rep.features_to_joints(straight).clone()
+    a = torch.arange(len(joints), dtype=joints.dtype) / 30 * 1.2 / 3.0  # left, radius 3 m
+    x, z = joints[..., 0], joints[..., 2]
+    c, s_ = torch.cos(a)[:, None], torch.sin(a)[:, None]
+    pelvis_z = z[:, :1]
+    # each frame's body turned about its pelvis by a, its pelvis moved onto the circle
+    rx, rz = x * c + (z - pelvis_z) * s_, (z - pelvis_z) * c - x * s_
+    joints[..., 0] = rx + (3.0 - 3.0 * torch.cos(a))[:, None]
+    joints[..., 2] = rz + (3.0 * torch.sin(a))[:, None]
+    turning = rep.joints_to_features(joints)
+    walker = walker[: len(turning)]  # a frame shorter: features are joints' differences
+    out = rep.features_to_joints(follow_leader(walker[None], turning[None])[0])[:, 0]
+    path = out[-1, [0, 2]] - out[-15, [0, 2]]
+    heading = torch.atan2(path[0], path[1])
+    assert abs(float(heading) - float(a[-8])) < 0.15  # it heads where the leader does
+    lead = rep.features_to_joints(turning)[:, 0]
+    gap = (out[:, [0, 2]] - lead[:, [0, 2]]).norm(dim=-1)
+    assert float((gap - 0.8).abs().max()) < 0.15
+    # a leader turning less than the threshold (this one turns about 60 degrees) is not followed
+    assert torch.equal(follow_leader(walker[None], turning[None], 75.0)[0], walker)
+    moved = follow_leader(walker[None], turning[None], 45.0)[0]
+    assert not torch.allclose(moved, walker)
+
+
 def test_warm_apart_tells_person_3_where_people_2_to_k_start(models, monkeypatch):
     """With ``sflow.warm_apart`` the proposal for person k >= 3 gets where people 2..k - 1
     start (person 1's frame, as decoded from the context), person 2's gets nothing; without
@@ -819,6 +910,8 @@ def test_warm_play_and_apart_need_what_they_narrow():
         check_config_values(set_option(tiny_config(), "sflow.warm_play=true"))
     with pytest.raises(UMFError, match="warm_apart needs"):
         check_config_values(set_option(tiny_config(), "sflow.warm_apart=true"))
+    with pytest.raises(UMFError, match="warm_follow needs"):
+        check_config_values(set_option(tiny_config(), "sflow.warm_follow=20"))
     with pytest.raises(UMFError, match="warm_clear needs"):
         check_config_values(set_option(tiny_config(), "sflow.warm_clear=0.45"))
     with pytest.raises(UMFError, match="warm_extend needs"):

@@ -199,8 +199,7 @@ class SFlowConfig:
     lambda_recon: float = 1.0  # 0 = no reconstruction loss (ablation)
     reaction_only: bool = False  # noise-free reaction path (ablation)
     context_noise: float = 0.0  # perturb real context latents to look generated
-    # reaction half starts at C + reaction_noise * eps' (0 = the authors' semi-noise path:
-    # it starts at C, so person 2's randomness must come through the context half)
+    # reaction half starts at C + reaction_noise * eps' (0: the authors' path, from C)
     reaction_noise: float = 0.0
     shared_backbone: bool = False  # share the P-Flow transformer (ablation)
     # people already generated enter the context as the encoder's posterior mean of their
@@ -229,10 +228,11 @@ class SFlowConfig:
     # keep the leader's pace and heading, where the first pass lags and drifts outwards
     warm_together: float = 0.0
     # with warm_together: a reaction retrieved for a row travelling with person 1 is played at
-    # person 1's pace (data.extension.played_at: resampled, its gait carried on), taken at any
-    # own pace, moved sideways to keep its joints 0.4 m from the leader's, at most 1.3 m out
-    # (clearance.clear_of): real partners are slower than the P-Flow's runners
+    # person 1's pace (data.extension.played_at), taken at any own pace, moved sideways to
+    # keep its joints 0.4 m from the leader's, at most 1.3 m out (clearance.clear_of)
     warm_play: bool = False
+    warm_follow: float | None = None  # with warm_play, d: such a reaction also follows
+    # person 1's path where it turns over d degrees (umf.path_follow); None: off
     # person k >= 3 keeps off where people 2..k - 1 start (reaction_bank.SPOT), where the
     # S-Flow, trained on pairs, puts a partner of person 1 (results/reactions-20261208): one
     # travelling with person 1 moved beyond the one whose spot it takes (clearance.beyond),

@@ -145,6 +145,9 @@ def check_config_values(config: Any, prefix: str = "") -> None:
         if sflow.warm_play and not sflow.warm_together:
             raise UMFError("sflow.warm_play needs sflow.warm_together > 0 (it plays the "
                            "reactions that travel with person 1 at person 1's pace)")  # fmt: skip
+        if sflow.warm_follow is not None and not sflow.warm_play:
+            raise UMFError("sflow.warm_follow needs sflow.warm_play (it carries the played "
+                           "reactions along person 1's path)")  # fmt: skip
         if sflow.warm_apart and sflow.warm_proposal != "retrieved":
             raise UMFError("sflow.warm_apart needs sflow.warm_proposal 'retrieved' (it "
                            "narrows the reactions retrieved)")  # fmt: skip

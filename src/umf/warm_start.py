@@ -74,6 +74,7 @@ from umf.data.extension import played_at
 from umf.data.relations import ONSET_SMOOTHING, SIDE_MARGIN, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
+from umf.path_follow import follow_path, path_turn
 from umf.reaction_bank import REACTIONS
 from umf.representation import (
     assemble_features,
@@ -154,6 +155,22 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
         played = torch.from_numpy(played_at(joints, r, t + 1)).to(features.dtype)
         out.append(assemble_features(played, joints_to_rot6d(played)))
     return torch.stack(out).to(features.device)
+
+
+def follow_leader(features: Tensor, leader: Tensor, turn: float = 0.0) -> Tensor:
+    """Features (B, T, 262) carried along the paths of ``leader`` (B, T, 262), both in person
+    1's frame (:func:`umf.path_follow.follow_path`), rotations recovered from the new joints;
+    a row whose leader's path turns ``turn`` degrees or less (:func:`path_turn`) is kept."""
+    out = []
+    for f, g in zip(features, leader, strict=True):
+        lead = features_to_joints_integrated(g.detach()).double().cpu().numpy()  # T + 1
+        if path_turn(lead) <= turn:
+            out.append(f)
+            continue
+        joints = features_to_joints_integrated(f.detach()).double().cpu().numpy()
+        moved = torch.from_numpy(follow_path(joints, lead)).to(features.dtype)
+        out.append(assemble_features(moved, joints_to_rot6d(moved)).to(f.device))
+    return torch.stack(out)
 
 
 def start_side(features: Tensor) -> Tensor:
@@ -254,13 +271,17 @@ def proposal(
             if cfg.warm_play:  # at person 1's pace, whatever the reaction's own: it fits
                 own = floor_velocity(reaction, fps).norm(dim=-1).clamp_min(MOVING)
                 reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
-                reaction = clear_of(reaction, leader[rows])  # level partners touched
+                if cfg.warm_follow is None:  # (else once it follows them, below)
+                    reaction = clear_of(reaction, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
             if extend is not None and bool(extend[rows].any()):  # the file's next place
                 go = extend[rows]
                 shift = torch.nan_to_num(ends[rows] - floor_start(reaction)) * go[:, None]
                 reaction = place_features(reaction, 0.0, shift[:, 0], shift[:, 1])
                 changed = changed | go
+            if cfg.warm_follow is not None:  # along person 1's path where it turns
+                reaction = follow_leader(reaction, leader[rows], cfg.warm_follow)
+                reaction = clear_of(reaction, leader[rows])
             if others is not None:  # on someone's spot (or body): beyond them
                 moved = beyond(reaction, others[rows], None if bodies is None
                                else bodies[rows], cfg.warm_clear)  # fmt: skip
