@@ -113,10 +113,12 @@ def test_a_leader_who_slows_down_is_kept_up_with():
     assert np.abs(gap).max() < 0.15  # a steady 3 m/s partner drifts 0.5 m either way
 
 
-def test_someone_standing_still_is_left_alone():
+def test_someone_standing_still_is_neither_carried_nor_followed():
     still = _person(np.tile([0.7, 0.0], (T, 1)), yaw=np.zeros(T))
     leader = _person(_circle(5.0, 2.0))
     np.testing.assert_array_equal(follow_path(still, leader), still)
+    walker = _person(_straight(0.8, 1.2))
+    np.testing.assert_array_equal(follow_path(walker, still), walker)  # nobody to follow
 
 
 def test_path_turn_reads_how_far_a_path_turns_either_way():

@@ -89,15 +89,16 @@ def follow_path(joints: np.ndarray, leader: np.ndarray, window: int = SMOOTHING)
     keeps its first-frame offset from the leader's in the leader's turning frame; each frame's
     pose is the person's own at the point where their stride has covered the new path's
     distance so far (past their end, their last gait cycle carried on), turned from their own
-    path's heading to the leader's. A person who barely travels is returned as is."""
+    path's heading to the leader's. A person who barely travels, or beside a leader who
+    barely does, is returned as is."""
     j = np.asarray(joints, dtype=np.float64)
     t = len(j)
     if len(leader) != t:
         raise ValueError(f"follow_path: {t} frames against the leader's {len(leader)}")
     own = smooth_path(j[:, 0, [0, 2]], window)
-    if t < 3 or arc_length(own)[-1] < 1e-3 * t:
-        return np.asarray(joints).copy()
     lead = smooth_path(np.asarray(leader, dtype=np.float64)[:, 0, [0, 2]], window)
+    if t < 3 or min(arc_length(own)[-1], arc_length(lead)[-1]) < 1e-3 * t:
+        return np.asarray(joints).copy()  # no path to follow, or nobody to carry
     lead_yaw = path_yaw(np.asarray(leader, dtype=np.float64)[:, 0, [0, 2]], window)
     new = lead + turn(own[0] - lead[0], lead_yaw - lead_yaw[0])
     need = arc_length(new)
