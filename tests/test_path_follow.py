@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from umf.path_follow import arc_length, follow_path, path_turn, path_yaw, smooth_path, turn
+from umf.path_follow import arc_length, centred_mean, follow_path, path_turn, path_yaw, turn
 
 FPS = 30.0
 T = 121
@@ -51,10 +51,10 @@ def test_turn_path_yaw_and_arc_length_agree_on_a_circle():
 
 def test_smoothing_keeps_a_steady_line_and_takes_out_a_strides_sway():
     line = _straight(0.3, 1.4)
-    np.testing.assert_allclose(smooth_path(line), line, atol=1e-12)
+    np.testing.assert_allclose(centred_mean(line), line, atol=1e-12)
     swaying = _straight(0.3, 1.4, sway=0.05)
     inner = slice(20, -20)
-    assert np.abs(smooth_path(swaying)[inner, 0] - 0.3).max() < 0.05 * 0.1
+    assert np.abs(centred_mean(swaying)[inner, 0] - 0.3).max() < 0.05 * 0.1
 
 
 def test_a_partner_beside_a_steady_leader_at_their_pace_is_left_as_they_are():

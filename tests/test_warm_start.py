@@ -449,12 +449,28 @@ def test_start_side_reads_the_first_frames_pelvis_beyond_the_side_margin():
     assert start_side(torch.stack(walks)).tolist() == [1.0, -1.0, 0.0, 0.0]
 
 
+def _retrieving_beside_leader(pipe, first, monkeypatch, **options):
+    """A bank of one reaction (``first[:1] + 0.5``, walking 1 m/s) that ``pipe`` retrieves
+    from for rows travelling with person 1 (``sflow`` set by ``monkeypatch``, so undone after
+    the test, with ``options`` on top), and the encoded prompts."""
+    from umf.reaction_bank import ReactionBank
+
+    bank = ReactionBank({30: first[:1] + 0.5}, velocities={30: torch.tensor([[0.0, 1.0]])})
+    cfg = pipe.config.sflow
+    settings = {"warm_pace": 0.1, "warm_proposal": "retrieved", "warm_neighbours": 1,
+                "warm_together": 0.8, **options}  # fmt: skip
+    for key, value in settings.items():
+        monkeypatch.setattr(cfg, key, value)
+    monkeypatch.setattr(pipe, "reactions", bank)
+    text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
+    return bank, text, uncond
+
+
 def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
     """With ``sflow.warm_play`` a row travelling with person 1 takes its retrieved reaction
     played at person 1's pace (rate: the leader's speed over the decoded reaction's) and
     fits, however slow the reaction; a row not travelling with person 1 keeps its latent."""
     import umf.warm_start
-    from umf.reaction_bank import ReactionBank
     from umf.warm_start import proposal
 
     pipe = models["warm"]
@@ -479,64 +495,55 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         return features + 1.0  # a motion other than the reaction's
 
     monkeypatch.setattr(umf.warm_start, "play_at", spy)
-    bank = ReactionBank({30: first[:1] + 0.5}, velocities={30: torch.tensor([[0.0, 1.0]])})
-    text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
+    bank, text, uncond = _retrieving_beside_leader(pipe, first, monkeypatch, warm_play=False,
+                                                   warm_clear=0.0)  # fmt: skip
     cfg = pipe.config.sflow
-    old = (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
-           cfg.warm_play, pipe.reactions)  # fmt: skip
-    try:
-        cfg.warm_pace, cfg.warm_proposal, cfg.warm_neighbours = 0.1, "retrieved", 1
-        cfg.warm_together, pipe.reactions = 0.8, bank
 
-        def run(play: bool):
-            cfg.warm_play = play
-            gens = [torch.Generator().manual_seed(s) for s in range(2)]
-            return proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
-
-        z, _, fits, _ = run(False)
-        assert fits.tolist() == [False, False] and not rates  # 1.0 m/s is no leader's pace
-        z, _, fits, _ = run(True)
-        assert fits.tolist() == [True, False]
-        (rate,) = rates
-        torch.testing.assert_close(rate, torch.tensor([2.5 / 1.6]))
-        assert torch.equal(z[1], bank.latents[30][0])  # not with the leader: as retrieved
-        assert not torch.allclose(z[0], bank.latents[30][0])
-        # with warm_apart's starts and warm_clear's bodies of people 2..k - 1, the played
-        # row is moved by beyond() against those (person 1 is clear_of's)
-        seen = []
-
-        def spy_beyond(features, others, bodies=None, clear=0.0):
-            seen.append((others.clone(), bodies.clone(), clear))
-            return features
-
-        monkeypatch.setattr(umf.warm_start, "beyond", spy_beyond)
-        cfg.warm_play, cfg.warm_clear = True, 0.55
-        others = torch.tensor([[[0.9, 0.0]], [[-0.9, 0.0]]])
-        bodies = torch.randn(2, 1, 30, 22, 3)
+    def run(play: bool):
+        cfg.warm_play = play
         gens = [torch.Generator().manual_seed(s) for s in range(2)]
-        proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
-                 others=others, bodies=bodies)  # fmt: skip
-        ((got_others, got_bodies, clear),) = seen
-        torch.testing.assert_close(got_others, others[:1])  # row 0 travels with person 1
-        torch.testing.assert_close(got_bodies, bodies[:1])
-        assert clear == 0.55
-        # with warm_extend's formation ends, the played row starts there before beyond()
-        starts = []
+        return proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
 
-        def spy_start(features, others, bodies=None, clear=0.0):
-            starts.append(rep.floor_start(features))
-            return features
+    z, _, fits, _ = run(False)
+    assert fits.tolist() == [False, False] and not rates  # 1.0 m/s is no leader's pace
+    z, _, fits, _ = run(True)
+    assert fits.tolist() == [True, False]
+    (rate,) = rates
+    torch.testing.assert_close(rate, torch.tensor([2.5 / 1.6]))
+    assert torch.equal(z[1], bank.latents[30][0])  # not with the leader: as retrieved
+    assert not torch.allclose(z[0], bank.latents[30][0])
+    # with warm_apart's starts and warm_clear's bodies of people 2..k - 1, the played
+    # row is moved by beyond() against those (person 1 is clear_of's)
+    seen = []
 
-        monkeypatch.setattr(umf.warm_start, "beyond", spy_start)
-        ends = torch.tensor([[1.8, 0.2], [float("nan"), float("nan")]])
-        gens = [torch.Generator().manual_seed(s) for s in range(2)]
-        proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
-                 others=others, bodies=bodies, ends=ends)  # fmt: skip
-        torch.testing.assert_close(starts[0], ends[:1], atol=1e-4, rtol=0)
-    finally:
-        (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
-         cfg.warm_play, pipe.reactions) = old  # fmt: skip
-        cfg.warm_clear = 0.0
+    def spy_beyond(features, others, bodies=None, clear=0.0):
+        seen.append((others.clone(), bodies.clone(), clear))
+        return features
+
+    monkeypatch.setattr(umf.warm_start, "beyond", spy_beyond)
+    cfg.warm_play, cfg.warm_clear = True, 0.55
+    others = torch.tensor([[[0.9, 0.0]], [[-0.9, 0.0]]])
+    bodies = torch.randn(2, 1, 30, 22, 3)
+    gens = [torch.Generator().manual_seed(s) for s in range(2)]
+    proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
+             others=others, bodies=bodies)  # fmt: skip
+    ((got_others, got_bodies, clear),) = seen
+    torch.testing.assert_close(got_others, others[:1])  # row 0 travels with person 1
+    torch.testing.assert_close(got_bodies, bodies[:1])
+    assert clear == 0.55
+    # with warm_extend's formation ends, the played row starts there before beyond()
+    starts = []
+
+    def spy_start(features, others, bodies=None, clear=0.0):
+        starts.append(rep.floor_start(features))
+        return features
+
+    monkeypatch.setattr(umf.warm_start, "beyond", spy_start)
+    ends = torch.tensor([[1.8, 0.2], [float("nan"), float("nan")]])
+    gens = [torch.Generator().manual_seed(s) for s in range(2)]
+    proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader,
+             others=others, bodies=bodies, ends=ends)  # fmt: skip
+    torch.testing.assert_close(starts[0], ends[:1], atol=1e-4, rtol=0)
 
 
 def test_warm_follow_carries_the_played_row_along_person_1(models, monkeypatch):
@@ -544,7 +551,6 @@ def test_warm_follow_carries_the_played_row_along_person_1(models, monkeypatch):
     handed to :func:`follow_leader` with that row's leader and d, then kept clear of them; a
     row not travelling with person 1 is not; without it (None), nobody is."""
     import umf.warm_start
-    from umf.reaction_bank import ReactionBank
     from umf.warm_start import proposal
 
     pipe = models["warm"]
@@ -571,22 +577,12 @@ def test_warm_follow_carries_the_played_row_along_person_1(models, monkeypatch):
     monkeypatch.setattr(umf.warm_start, "play_at", lambda f, rate: f)
     monkeypatch.setattr(umf.warm_start, "follow_leader", spy_follow)
     monkeypatch.setattr(umf.warm_start, "clear_of", spy_clear)
-    bank = ReactionBank({30: first[:1] + 0.5}, velocities={30: torch.tensor([[0.0, 1.0]])})
-    text, uncond = (pipe.text_encoder.encode([p] * 2) for p in ("two people run", ""))
-    cfg = pipe.config.sflow
-    old = (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
-           cfg.warm_play, pipe.reactions)  # fmt: skip
-    try:
-        cfg.warm_pace, cfg.warm_proposal, cfg.warm_neighbours = 0.1, "retrieved", 1
-        cfg.warm_together, cfg.warm_play, pipe.reactions = 0.8, True, bank
-        for follow in (None, 20.0):
-            cfg.warm_follow = follow
-            gens = [torch.Generator().manual_seed(s) for s in range(2)]
-            proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
-    finally:
-        (cfg.warm_pace, cfg.warm_proposal, cfg.warm_together, cfg.warm_neighbours,
-         cfg.warm_play, pipe.reactions) = old  # fmt: skip
-        cfg.warm_follow = None
+    bank, text, uncond = _retrieving_beside_leader(pipe, first, monkeypatch, warm_play=True,
+                                                   warm_follow=None)  # fmt: skip
+    for follow in (None, 20.0):
+        pipe.config.sflow.warm_follow = follow
+        gens = [torch.Generator().manual_seed(s) for s in range(2)]
+        proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
     assert [c[0] for c in calls] == ["clear", "follow", "clear"]
     assert calls[1][2] == 20.0  # the turn beyond which a row follows
     torch.testing.assert_close(calls[1][1], leader[:1])  # row 0's leader only

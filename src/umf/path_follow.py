@@ -3,7 +3,7 @@
 Every real partner in the training scenes runs or walks straight (``research/runner_turns.py``:
 no training crop turns more than 20 degrees), and so does every reaction in the bank. The
 P-Flow's runner curves now and then (52-56 degrees in seed 7 of "Two people run side by
-side.") and changes pace within a scene (3.8 m/s over its first second, 2.7 over its last);
+side.") and changes pace within a scene (3.8 m/s over its first 1.3 s, 2.7 over its last);
 a straight proposal at the leader's mean pace then ends a metre or more behind it.
 
 :func:`follow_path` moves such a proposal onto the leader's own path, as motion path editing
@@ -28,7 +28,8 @@ LONGEST = 4
 
 
 def centred_mean(x: np.ndarray, window: int = SMOOTHING) -> np.ndarray:
-    """``x`` (T, ...) under a centred moving average of ``window`` frames, the window
+    """``x`` (T, ...) under a centred moving average of ``window`` frames (for a floor path:
+    without the sway of a stride cycle), the window
     narrowing towards each end so that it stays centred: a path bending away at an end
     biases neither its position nor its direction there, as a padded one does."""
     x = np.asarray(x, dtype=np.float64)
@@ -37,11 +38,6 @@ def centred_mean(x: np.ndarray, window: int = SMOOTHING) -> np.ndarray:
     total = np.concatenate([np.zeros((1, *x.shape[1:])), np.cumsum(x, axis=0)])
     lo, hi = np.arange(t) - half, np.arange(t) + half + 1
     return (total[hi] - total[lo]) / (hi - lo).reshape(-1, *([1] * (x.ndim - 1)))
-
-
-def smooth_path(path: np.ndarray, window: int = SMOOTHING) -> np.ndarray:
-    """A floor path (T, 2) without the sway of a stride cycle (:func:`centred_mean`)."""
-    return centred_mean(path, window)
 
 
 def path_yaw(path: np.ndarray, window: int = 1) -> np.ndarray:
@@ -95,20 +91,21 @@ def follow_path(joints: np.ndarray, leader: np.ndarray, window: int = SMOOTHING)
     t = len(j)
     if len(leader) != t:
         raise ValueError(f"follow_path: {t} frames against the leader's {len(leader)}")
-    own = smooth_path(j[:, 0, [0, 2]], window)
-    lead = smooth_path(np.asarray(leader, dtype=np.float64)[:, 0, [0, 2]], window)
-    if t < 3 or min(arc_length(own)[-1], arc_length(lead)[-1]) < 1e-3 * t:
+    lead_floor = np.asarray(leader, dtype=np.float64)[:, 0, [0, 2]]
+    own, lead = centred_mean(j[:, 0, [0, 2]], window), centred_mean(lead_floor, window)
+    own_length = arc_length(own)[-1]
+    if t < 3 or min(own_length, arc_length(lead)[-1]) < 1e-3 * t:
         return np.asarray(joints).copy()  # no path to follow, or nobody to carry
-    lead_yaw = path_yaw(np.asarray(leader, dtype=np.float64)[:, 0, [0, 2]], window)
+    lead_yaw = path_yaw(lead_floor, window)
     new = lead + turn(own[0] - lead[0], lead_yaw - lead_yaw[0])
     need = arc_length(new)
     # the person's motion, carried on past its end until it covers the new path
-    per_frame = arc_length(own)[-1] / (t - 1)
     frames = t
-    if need[-1] > arc_length(own)[-1]:
+    if need[-1] > own_length:
+        per_frame = own_length / (t - 1)
         frames = int(np.clip(np.ceil(need[-1] / per_frame) + 2, t, LONGEST * t))
     longer = played_at(j, 1.0, frames) if frames > t else j
-    path = smooth_path(longer[:, 0, [0, 2]], window)
+    path = centred_mean(longer[:, 0, [0, 2]], window)
     covered = arc_length(path) + 1e-9 * np.arange(len(path))  # strictly increasing
     times = np.interp(need, covered, np.arange(len(path), dtype=np.float64))
     pose = interpolate_frames(longer, times)

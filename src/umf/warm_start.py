@@ -149,12 +149,23 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
     """Features (B, T, 262) played ``rate`` (B,) times as fast (:func:`played_at`: clamped
     to a fifth slower and a quarter faster, the gait carried on past the end), rotations
     recovered from the played joints."""
-    t, out = features.shape[1], []
-    for f, r in zip(features, rate.tolist(), strict=True):
-        joints = features_to_joints_integrated(f.detach()).double().cpu().numpy()  # T + 1
-        played = torch.from_numpy(played_at(joints, r, t + 1)).to(features.dtype)
-        out.append(assemble_features(played, joints_to_rot6d(played)))
-    return torch.stack(out).to(features.device)
+    t = features.shape[1]
+    return torch.stack([
+        _features(played_at(_joints(f), r, t + 1), features)
+        for f, r in zip(features, rate.tolist(), strict=True)]).to(features.device)  # fmt: skip
+
+
+def _joints(features: Tensor) -> Any:
+    """One row's features (T, 262) as float64 joints (T + 1, 22, 3) in numpy, for the
+    motion edits done there (:func:`play_at`, :func:`follow_leader`)."""
+    return features_to_joints_integrated(features.detach()).double().cpu().numpy()
+
+
+def _features(joints: Any, like: Tensor) -> Tensor:
+    """Numpy joints (T + 1, 22, 3) back as features (T, 262) of ``like``'s dtype, rotations
+    recovered from the joints."""
+    x = torch.from_numpy(joints).to(like.dtype)
+    return assemble_features(x, joints_to_rot6d(x))
 
 
 def follow_leader(features: Tensor, leader: Tensor, turn: float = 0.0) -> Tensor:
@@ -163,13 +174,9 @@ def follow_leader(features: Tensor, leader: Tensor, turn: float = 0.0) -> Tensor
     a row whose leader's path turns ``turn`` degrees or less (:func:`path_turn`) is kept."""
     out = []
     for f, g in zip(features, leader, strict=True):
-        lead = features_to_joints_integrated(g.detach()).double().cpu().numpy()  # T + 1
-        if path_turn(lead) <= turn:
-            out.append(f)
-            continue
-        joints = features_to_joints_integrated(f.detach()).double().cpu().numpy()
-        moved = torch.from_numpy(follow_path(joints, lead)).to(features.dtype)
-        out.append(assemble_features(moved, joints_to_rot6d(moved)).to(f.device))
+        lead = _joints(g)
+        moved = f if path_turn(lead) <= turn else _features(follow_path(_joints(f), lead), f)
+        out.append(moved.to(f.device))
     return torch.stack(out)
 
 
