@@ -1,6 +1,7 @@
 """Calibrate the coverage threshold: paraphrases of trained actions against unseen actions.
 
     python research/calibrate_coverage.py --corpus out/corpus [--model DIR] [--out results/coverage]
+    python research/calibrate_coverage.py --test results/coverage/fresh [--model DIR]
 
 Builds the vocabulary of the corpus's training captions in the model's text encoder, scores
 ``results/coverage/paraphrases.txt`` (should be known) and ``unseen.txt`` (should not), picks
@@ -10,6 +11,11 @@ paraphrases) and reports precision and recall of "unknown" on the odd lines, hel
 ranking quality (AUC, paraphrases above unseen actions) of other scores built from the same
 cosines: the mean of the k nearest captions, and the nearest one less its own crowding
 (as in cross-domain similarity local scaling), each with its threshold chosen as above.
+
+``--test DIR`` chooses nothing: it scores ``DIR/paraphrases.txt`` and ``DIR/unseen.txt`` (lists
+written after the threshold was fixed) with the model as a user gets it (``pipe.coverage``: the
+vocabulary and threshold the model carries) and writes ``DIR/test.json``, with each rate's 95 %
+Wilson interval, since a list of a few dozen lines moves a rate by several points per line.
 """
 
 from __future__ import annotations
@@ -37,6 +43,57 @@ def rates(known: np.ndarray, unseen: np.ndarray, t: float) -> dict[str, float]:
         "paraphrases_flagged": round(flagged_known / len(known), 4),
         "precision": round(flagged_unseen / flagged, 4) if flagged else 1.0,
     }
+
+
+def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
+    """95 % Wilson score interval of a rate of k in n."""
+    if n == 0:
+        return (0.0, 1.0)
+    p = k / n
+    mid = (p + z * z / (2 * n)) / (1 + z * z / n)
+    half = z * np.sqrt(p * (1 - p) / n + z * z / (4 * n * n)) / (1 + z * z / n)
+    return (round(float(mid - half), 4), round(float(mid + half), 4))
+
+
+def test_report(known: list[dict], unseen: list[dict]) -> dict:
+    """Rates of the model's own verdicts (``known``) on paraphrases and unseen actions."""
+    fk = sum(not c["known"] for c in known)
+    fu = sum(not c["known"] for c in unseen)
+    return {
+        "paraphrases": len(known),
+        "unseen": len(unseen),
+        "paraphrases_flagged": round(fk / len(known), 4),
+        "paraphrases_flagged_95": wilson(fk, len(known)),
+        "unseen_flagged": round(fu / len(unseen), 4),
+        "unseen_flagged_95": wilson(fu, len(unseen)),
+        "precision": round(fu / (fu + fk), 4) if fu + fk else 1.0,
+    }
+
+
+def run_test(lists: Path, model: Path | None) -> None:
+    from umf.pipeline import UMFPipeline
+
+    pipe = UMFPipeline.from_pretrained(model)
+    if pipe.vocabulary is None:
+        raise SystemExit("this model carries no vocabulary")
+    known_p, unseen_p = read_list(lists / "paraphrases.txt"), read_list(lists / "unseen.txt")
+    known, unseen = pipe.coverage(known_p), pipe.coverage(unseen_p)
+    report = {
+        "model": pipe.name,
+        "threshold": pipe.vocabulary.threshold,
+        "vocabulary_phrases": len(pipe.vocabulary.phrases),
+        **test_report(known, unseen),
+        "paraphrases_scores": {p: c["score"] for p, c in zip(known_p, known, strict=True)},
+        "unseen_scores": {p: c["score"] for p, c in zip(unseen_p, unseen, strict=True)},
+    }
+    (lists / "test.json").write_text(json.dumps(report, indent=1) + "\n")
+    print({k: v for k, v in report.items() if not k.endswith("_scores")})
+    for p, c in sorted(zip(known_p, known, strict=True), key=lambda x: x[1]["score"]):
+        if not c["known"]:
+            print(f"  flagged paraphrase {c['score']:.3f} {p}  (nearest: {c['nearest'][0]})")
+    for p, c in sorted(zip(unseen_p, unseen, strict=True), key=lambda x: -x[1]["score"]):
+        if c["known"]:
+            print(f"  passed unseen      {c['score']:.3f} {p}  (nearest: {c['nearest'][0]})")
 
 
 def auc(known: np.ndarray, unseen: np.ndarray) -> float:
@@ -85,12 +142,18 @@ def print_variants(vocab, encoder, known_p: list[str], unseen_p: list[str]) -> N
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--corpus", type=Path, required=True)
+    ap.add_argument("--corpus", type=Path, default=None)
     ap.add_argument("--model", type=Path, default=None)
     ap.add_argument("--lists", type=Path, default=Path("results/coverage"))
     ap.add_argument("--out", type=Path, default=Path("results/coverage"))
     ap.add_argument("--variants", action="store_true", help="compare other scores too")
+    ap.add_argument("--test", type=Path, default=None, help="score fresh lists, choose nothing")
     args = ap.parse_args()
+    if args.test is not None:
+        run_test(args.test, args.model)
+        return
+    if args.corpus is None:
+        ap.error("--corpus is needed to calibrate")
 
     from umf.coverage import build_vocabulary
     from umf.data.corpus import Corpus

@@ -345,6 +345,10 @@ def test_the_bundled_model_says_what_it_does_not_know(pipe):
     assert known["known"] and salsa["known"] and not hug["known"]
     assert "contact" in salsa and "contact" not in known  # a real take whose partners touch
     assert {"salsa", "backflip", "walk"} <= set(pipe.vocabulary.actions)
+    # groups are composed at sampling: their captions are known too (before 2026-12-06 the
+    # vocabulary held trained captions only, and these scored 0.65 and 0.68)
+    row, file = pipe.coverage(["Four people walk side by side.", "Six people walk in single file."])
+    assert row["known"] and file["known"] and "single_file" in pipe.vocabulary.groups
 
 
 def test_each_person_does_what_their_own_prompt_says(pipe):

@@ -64,9 +64,15 @@ def test_vocabulary_round_trips_and_a_broken_one_is_one_line(tmp_path):
         contact={"someone bows": {"closest_m": 0.1, "pelvis_m": 0.3}},
     )
     v.actions, v.styles, v.relations = ["walk", "bow"], ["normal"], ["greet"]
+    v.groups = ["single_file"]
     v.save(tmp_path)
     w = Vocabulary.load(tmp_path)
     assert w.phrases == v.phrases and w.actions == ["walk", "bow"] and w.contact == v.contact
+    assert w.groups == ["single_file"]
+    doc = json.loads((tmp_path / "vocabulary.json").read_text())
+    del doc["groups"]  # a vocabulary written before group relations
+    (tmp_path / "vocabulary.json").write_text(json.dumps(doc))
+    assert Vocabulary.load(tmp_path).groups == []
     assert torch.allclose(w.embeddings, v.embeddings, atol=1e-3)  # stored in fp16
     assert Vocabulary.load(tmp_path / "nothing") is None
     doc = json.loads((tmp_path / "vocabulary.json").read_text())
@@ -95,6 +101,24 @@ def test_a_corpus_vocabulary_holds_its_train_captions_and_labels(corpus):
         t for c in train for t in c.captions
     }
     assert not held_out & set(v.phrases)  # only what training saw
+
+
+def test_a_vocabulary_knows_the_groups_composed_from_its_train_clips(corpus):
+    """Groups are composed at sampling, never trained: their captions join the vocabulary as
+    groups composed from the training clips (never from a held-out clip) would be worded."""
+    from umf.coverage import train_groups
+    from umf.data.scene_relations import RELATIONS
+
+    groups = train_groups(corpus, count=40)
+    assert groups and all(r["num_people"] >= 3 for r in groups)
+    train = {c.id for c in corpus.split_clips("train")}
+    assert all(a["clip"] in train for r in groups for a in r["people"])
+    assert train_groups(corpus, count=40) == groups  # deterministic
+    v = build_vocabulary(corpus, WordText(), "fake")
+    assert {t for r in train_groups(corpus) for t in r["captions"]} <= set(v.phrases)
+    assert v.groups == sorted({r["relation"] for r in train_groups(corpus)})
+    assert all(max(RELATIONS[g].sizes) > 2 for g in v.groups)
+    assert not set(v.groups) & set(v.relations)  # pairs are trained scenes, groups are not
 
 
 def test_touching_takes_give_their_closeness(real_joints):

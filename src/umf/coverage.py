@@ -8,6 +8,12 @@ caption: ``{"score": float, "known": score >= threshold, "nearest": [captions]}`
 the words that count people from both sides was tried and separates worse: AUC 0.959 against
 0.968 on the calibration lists.)
 
+Groups of 3 or more are not trained scenes: the pipeline composes them at sampling, each
+person k >= 3 a reaction to everyone before them. What the model can be asked for is the
+group relations its corpus composes (rows, single files, circles, audiences, gatherings), so
+the vocabulary also holds the captions of groups composed from the training clips, as the
+corpus composes its test groups (``groups`` names those relations).
+
 The threshold is calibrated on paraphrases of trained actions against actions no bundled
 corpus has (``research/calibrate_coverage.py``; precision and recall in docs/model.md).
 """
@@ -29,6 +35,8 @@ VOCABULARY_JSON = "vocabulary.json"
 VOCABULARY_TENSORS = "vocabulary.safetensors"
 THRESHOLD = 0.714  # calibrated on the bundled corpus: research/calibrate_coverage.py, docs/model.md
 NEAREST = 3
+GROUP_SCENES = 300  # composed groups whose captions join the vocabulary (they saturate by 200)
+GROUP_SEED = 23
 
 
 @dataclass
@@ -42,6 +50,7 @@ class Vocabulary:
     actions: list[str] = field(default_factory=list)
     styles: list[str] = field(default_factory=list)
     relations: list[str] = field(default_factory=list)
+    groups: list[str] = field(default_factory=list)  # relations of 3+ people (module notes)
     # captions of real takes whose people touch -> how close they come (umf.separation)
     contact: dict[str, dict[str, float]] = field(default_factory=dict)
 
@@ -52,7 +61,8 @@ class Vocabulary:
         (model_dir / VOCABULARY_TENSORS).chmod(0o644)
         write_json_atomic(model_dir / VOCABULARY_JSON, {
             "encoder": self.encoder, "threshold": self.threshold, "actions": self.actions,
-            "styles": self.styles, "relations": self.relations, "phrases": self.phrases,
+            "styles": self.styles, "relations": self.relations, "groups": self.groups,
+            "phrases": self.phrases,
             "contact": self.contact,
         })  # fmt: skip
 
@@ -78,7 +88,8 @@ class Vocabulary:
             raise UMFError(f"{model_dir}: corrupt vocabulary (contact)")
         return cls(phrases, emb, str(doc.get("encoder", "")), threshold,
                    list(doc.get("actions", [])), list(doc.get("styles", [])),
-                   list(doc.get("relations", [])), contact)  # fmt: skip
+                   list(doc.get("relations", [])), list(doc.get("groups", [])),
+                   contact)  # fmt: skip
 
     def score(self, prompts: Sequence[str], encoder) -> list[dict[str, Any]]:
         """Coverage of each prompt (module notes), in the encoder the vocabulary was built with."""
@@ -113,8 +124,8 @@ def embed(encoder, texts: Sequence[str], batch: int = 256) -> torch.Tensor:
 def build_vocabulary(
     corpus, encoder, encoder_name: str, threshold: float = THRESHOLD
 ) -> Vocabulary:
-    """The vocabulary of a corpus: its distinct training captions (clips and scenes), its
-    content labels, styles and scene relations."""
+    """The vocabulary of a corpus: its distinct training captions (clips, scenes and groups
+    composed from its training clips), its content labels, styles and scene relations."""
     clips = corpus.split_clips("train")
     texts: set[str] = set()
     actions, styles, relations = set(), set(), set()
@@ -129,10 +140,28 @@ def build_vocabulary(
     for r in corpus.scenes.get("train", []):
         texts.update(r["captions"])
         relations.add(str(r["relation"]))
+    group_records = train_groups(corpus)
+    for r in group_records:
+        texts.update(r["captions"])
+    groups = sorted({str(r["relation"]) for r in group_records})
     contact = take_contacts(clips)
     phrases = sorted(t for t in texts if t.strip())
     return Vocabulary(phrases, embed(encoder, phrases), encoder_name, threshold,
-                      sorted(actions), sorted(styles), sorted(relations), contact)  # fmt: skip
+                      sorted(actions), sorted(styles), sorted(relations), groups,
+                      contact)  # fmt: skip
+
+
+def train_groups(corpus, count: int = GROUP_SCENES) -> list[dict[str, Any]]:
+    """Groups of the corpus's sizes composed from its training clips, as its test groups are
+    composed from its test clips (:func:`umf.data.composer.compose_corpus`)."""
+    from umf.data.composer import compose_corpus
+    from umf.data.scene_relations import RELATIONS
+
+    sizes = tuple(corpus.manifest.get("config", {}).get("group_sizes", (3, 4, 5, 6)))
+    names = [n for n, r in RELATIONS.items() if any(s > 2 for s in r.sizes)]
+    actors = corpus.actors()
+    train = [actors[c.id] for c in corpus.split_clips("train") if c.id in actors]
+    return compose_corpus(train, count, sizes, seed=GROUP_SEED, relations=names)
 
 
 def take_contacts(clips) -> dict[str, dict[str, float]]:

@@ -42,7 +42,10 @@ def info(
     typer.echo(f"actions ({len(vocab.actions)}): {', '.join(vocab.actions)}")
     typer.echo(f"styles ({len(vocab.styles)}): {', '.join(vocab.styles)}")
     typer.echo(f"multi-person relations ({len(vocab.relations)}): {', '.join(vocab.relations)}")
-    typer.echo(f"trained captions: {len(vocab.phrases)}; a prompt is known when its coverage "
+    if vocab.groups:
+        typer.echo(f"group relations, 3 or more people composed at sampling ({len(vocab.groups)}):"
+                   f" {', '.join(vocab.groups)}")  # fmt: skip
+    typer.echo(f"known captions: {len(vocab.phrases)}; a prompt is known when its coverage "
                f"(cosine to the nearest one) is at least {vocab.threshold:.3f}")  # fmt: skip
     touching = sorted(vocab.contact)
     if touching:

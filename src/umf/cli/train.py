@@ -144,16 +144,17 @@ def vocabulary(
     threshold: float | None = typer.Option(None, help="Coverage below which a prompt is "
                                            "unknown (default: the calibrated one)."),
 ) -> None:  # fmt: skip
-    """Write the model's training vocabulary (captions, actions, styles, relations and their
-    text embeddings) from the corpus it was trained on, for coverage warnings."""
+    """Write the model's training vocabulary (captions, actions, styles, relations, group
+    relations and their text embeddings) from the corpus it was trained on, for coverage
+    warnings."""
     from umf.coverage import THRESHOLD
     from umf.train.run import write_vocabulary
     from umf.validation import check_float
 
     t = THRESHOLD if threshold is None else check_float("--threshold", threshold, -1.0, 1.0)
     vocab = write_vocabulary(model, corpus, t)
-    typer.echo(f"vocabulary of {len(vocab.phrases)} captions, {len(vocab.actions)} actions "
-               f"written to {model}")  # fmt: skip
+    typer.echo(f"vocabulary of {len(vocab.phrases)} captions, {len(vocab.actions)} actions, "
+               f"{len(vocab.groups)} group relations written to {model}")  # fmt: skip
 
 
 @app.command("reactions")
