@@ -41,12 +41,12 @@ def trace(pipe, prompt: str, people: int, seed: int) -> tuple[np.ndarray, list[d
         return length, idx, fits
 
     def proposal(p, first, decoded, *args, **kwargs):
-        z, nfe, fits, waits = real_proposal(p, first, decoded, *args, **kwargs)
+        z, nfe, fits, waits, straight = real_proposal(p, first, decoded, *args, **kwargs)
         played = p.decode(z, decoded.shape[1], reaction=True)
         steps[-1] |= {"first": float(ws.floor_velocity(decoded, fps)[0].norm()),
                       "proposal": float(ws.floor_velocity(played, fps)[0].norm()),
                       "fits": bool(fits[0])}  # fmt: skip
-        return z, nfe, fits, waits
+        return z, nfe, fits, waits, straight
 
     ws.proposal, pipe.reactions.pick = proposal, pick
     try:

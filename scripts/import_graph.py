@@ -39,6 +39,7 @@ LAYERS: list[tuple[str, list[str]]] = [
     ("pipeline (Algorithm 1)", ["umf.pipeline", "umf.separation", "umf.anchoring",
                                 "umf.coverage", "umf.reroll", "umf.person_prompts",
                                 "umf.warm_start", "umf.clearance", "umf.path_follow",
+                                "umf.warm_follow",
                                 "umf.reaction_bank",
                                 "umf.take_start",
                                 "umf.clean_up"]),

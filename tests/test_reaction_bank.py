@@ -137,9 +137,9 @@ def test_the_pipeline_warm_starts_from_a_real_reaction(corpus, model, tmp_path, 
     real = umf.warm_start.proposal
 
     def seen(*args, **kw):
-        z, nfe, fits, lag = real(*args, **kw)
+        z, nfe, fits, lag, straight = real(*args, **kw)
         proposals.append(z)
-        return z, nfe, fits, lag
+        return z, nfe, fits, lag, straight
 
     monkeypatch.setattr(umf.warm_start, "proposal", seen)
     a = pipe("two people walk side by side", num_people=3, seconds=1.0, seed=0, fit=False)[0]

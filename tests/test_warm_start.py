@@ -142,8 +142,8 @@ def test_the_proposal_matters(models, monkeypatch):
     real = umf.warm_start.proposal
 
     def shifted(pipe, first, *args, **kw):
-        z, nfe, fits, lag = real(pipe, first, *args, **kw)
-        return z + 1.0, nfe, fits, lag
+        z, nfe, fits, lag, straight = real(pipe, first, *args, **kw)
+        return z + 1.0, nfe, fits, lag, straight
 
     monkeypatch.setattr(umf.warm_start, "proposal", shifted)
     other = _scene(models["warm"], people=2)
@@ -397,8 +397,8 @@ def test_warm_together_retrieves_at_the_leaders_pace(models, monkeypatch):
         def run(together: float, mirror=None):
             cfg.warm_together = together
             gens = [torch.Generator().manual_seed(s) for s in range(2)]
-            z, _, fits, _ = proposal(pipe, first, decoded, text, uncond, gens, None, {},
-                                     mirror=mirror, leader=decoded.flip(0))  # fmt: skip
+            z, _, fits, _, _ = proposal(pipe, first, decoded, text, uncond, gens, None, {},
+                                        mirror=mirror, leader=decoded.flip(0))  # fmt: skip
             return z, fits
 
         z, fits = run(0.0)  # its own pace: the slow one
@@ -504,9 +504,9 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
         gens = [torch.Generator().manual_seed(s) for s in range(2)]
         return proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
 
-    z, _, fits, _ = run(False)
+    z, _, fits, _, _ = run(False)
     assert fits.tolist() == [False, False] and not rates  # 1.0 m/s is no leader's pace
-    z, _, fits, _ = run(True)
+    z, _, fits, _, _ = run(True)
     assert fits.tolist() == [True, False]
     (rate,) = rates
     torch.testing.assert_close(rate, torch.tensor([2.5 / 1.6]))
@@ -546,10 +546,13 @@ def test_warm_play_plays_a_partner_at_the_leaders_pace(models, monkeypatch):
     torch.testing.assert_close(starts[0], ends[:1], atol=1e-4, rtol=0)
 
 
-def test_warm_follow_carries_the_played_row_along_person_1(models, monkeypatch):
-    """With ``sflow.warm_follow`` d the played reaction of a row travelling with person 1 is
-    handed to :func:`follow_leader` with that row's leader and d, then kept clear of them; a
-    row not travelling with person 1 is not; without it (None), nobody is."""
+def test_warm_follow_proposes_a_row_carried_and_keeps_its_straight_proposal(models, monkeypatch):
+    """With ``sflow.warm_follow`` d, a row travelling with person 1 whose person 1 turns more
+    than d degrees (:func:`turning`) is proposed carried along them (:func:`follow_leader`,
+    then kept clear of them) and its straight proposal, as without the option, comes back
+    to fall back on; without the option, or where person 1 does not turn, the proposal is
+    the straight one and nothing comes back. A row not travelling with person 1 is never
+    carried."""
     import umf.warm_start
     from umf.warm_start import proposal
 
@@ -563,31 +566,45 @@ def test_warm_follow_carries_the_played_row_along_person_1(models, monkeypatch):
             return torch.tensor([[0.0, 1.0], [0.0, -1.0]])  # row 1 walks the other way
         return torch.tensor([[0.0, 2.5]] * len(f))
 
-    calls = []
+    calls, turns = [], {"now": False}
 
-    def spy_follow(features, lead, turn):
-        calls.append(("follow", lead.clone(), turn))
+    def spy_follow(features, lead, turn=0.0):
+        calls.append(("follow", lead.clone()))
         return features + 2.0
 
     def spy_clear(features, lead, distance=0.4):
         calls.append(("clear", features.clone()))
         return features
 
+    def spy_turning(lead, d):
+        calls.append(("turning", d))
+        return torch.full((len(lead),), turns["now"])
+
     monkeypatch.setattr(umf.warm_start, "floor_velocity", velocity)
     monkeypatch.setattr(umf.warm_start, "play_at", lambda f, rate: f)
     monkeypatch.setattr(umf.warm_start, "follow_leader", spy_follow)
     monkeypatch.setattr(umf.warm_start, "clear_of", spy_clear)
+    monkeypatch.setattr(umf.warm_start, "turning", spy_turning)
     bank, text, uncond = _retrieving_beside_leader(pipe, first, monkeypatch, warm_play=True,
                                                    warm_follow=None)  # fmt: skip
-    for follow in (None, 20.0):
-        pipe.config.sflow.warm_follow = follow
+    out = []
+    for follow, turn in ((None, True), (20.0, False), (20.0, True)):
+        pipe.config.sflow.warm_follow, turns["now"] = follow, turn
         gens = [torch.Generator().manual_seed(s) for s in range(2)]
-        proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
-    assert [c[0] for c in calls] == ["clear", "follow", "clear"]
-    assert calls[1][2] == 20.0  # the turn beyond which a row follows
-    torch.testing.assert_close(calls[1][1], leader[:1])  # row 0's leader only
+        z, _, _, _, straight = proposal(pipe, first, decoded, text, uncond, gens, None, {},
+                                        leader=leader)  # fmt: skip
+        out.append((z, straight))
+    assert [c[0] for c in calls] == ["clear", "clear", "turning", "clear", "turning",
+                                     "follow", "clear"]  # fmt: skip
+    assert calls[2][1] == 20.0  # the turn beyond which a row is carried
+    torch.testing.assert_close(calls[5][1], leader[:1])  # row 0's leader only
     reaction = pipe.decode(bank.latents[30][:1], 30, reaction=True)
-    torch.testing.assert_close(calls[2][1], reaction + 2.0)  # cleared once it follows
+    torch.testing.assert_close(calls[6][1], reaction + 2.0)  # cleared once carried
+    (z0, s0), (z1, s1), (z2, s2) = out
+    assert s0 is None and s1 is None and torch.equal(z1, z0)  # as without the option
+    rows, z_straight = s2
+    assert rows.tolist() == [0] and torch.equal(z_straight[0], z0[0])
+    assert torch.equal(z2[1], z0[1]) and not torch.allclose(z2[0], z0[0])
 
 
 def test_follow_leader_turns_a_straight_walker_with_a_turning_leader():
@@ -818,7 +835,7 @@ def test_warm_clear_moves_a_touching_first_pass_itself_without_a_fitting_proposa
         return w, nfe
 
     def proposal(p, first, *args, **kwargs):
-        return first * 0.0 + 3.0, 0, torch.tensor([False, True]), None
+        return first * 0.0 + 3.0, 0, torch.tensor([False, True]), None, None
 
     def timed(p, guess, prev, lag, frames, leader):
         return guess, torch.tensor([False, False])

@@ -74,15 +74,11 @@ from umf.data.extension import played_at
 from umf.data.relations import ONSET_SMOOTHING, SIDE_MARGIN, action_onset
 from umf.errors import UMFError
 from umf.models.denoiser import FROM_CONFIG
-from umf.path_follow import follow_path, path_turn
 from umf.reaction_bank import REACTIONS
 from umf.representation import (
-    assemble_features,
     features_to_joints,
-    features_to_joints_integrated,
     floor_start,
     hold_to_length,
-    joints_to_rot6d,
     leader_frame,
     place_features,
     shift_in_time,
@@ -90,6 +86,7 @@ from umf.representation import (
 )
 from umf.skeleton import FOOT_LEFT, FOOT_RIGHT
 from umf.text import mirror_caption
+from umf.warm_follow import fall_back, follow_leader, row_features, row_joints, turning, twin
 
 Tensor = torch.Tensor
 
@@ -151,33 +148,8 @@ def play_at(features: Tensor, rate: Tensor) -> Tensor:
     recovered from the played joints."""
     t = features.shape[1]
     return torch.stack([
-        _features(played_at(_joints(f), r, t + 1), features)
+        row_features(played_at(row_joints(f), r, t + 1), features)
         for f, r in zip(features, rate.tolist(), strict=True)]).to(features.device)  # fmt: skip
-
-
-def _joints(features: Tensor) -> Any:
-    """One row's features (T, 262) as float64 joints (T + 1, 22, 3) in numpy, for the
-    motion edits done there (:func:`play_at`, :func:`follow_leader`)."""
-    return features_to_joints_integrated(features.detach()).double().cpu().numpy()
-
-
-def _features(joints: Any, like: Tensor) -> Tensor:
-    """Numpy joints (T + 1, 22, 3) back as features (T, 262) of ``like``'s dtype, rotations
-    recovered from the joints."""
-    x = torch.from_numpy(joints).to(like.dtype)
-    return assemble_features(x, joints_to_rot6d(x))
-
-
-def follow_leader(features: Tensor, leader: Tensor, turn: float = 0.0) -> Tensor:
-    """Features (B, T, 262) carried along the paths of ``leader`` (B, T, 262), both in person
-    1's frame (:func:`umf.path_follow.follow_path`), rotations recovered from the new joints;
-    a row whose leader's path turns ``turn`` degrees or less (:func:`path_turn`) is kept."""
-    out = []
-    for f, g in zip(features, leader, strict=True):
-        lead = _joints(g)
-        moved = f if path_turn(lead) <= turn else _features(follow_path(_joints(f), lead), f)
-        out.append(moved.to(f.device))
-    return torch.stack(out)
 
 
 def start_side(features: Tensor) -> Tensor:
@@ -271,42 +243,68 @@ def proposal(
             got = bank.velocities[length].to(velocity)[idx]
             nearer = (got - velocity).norm(dim=-1) < (own_pace - velocity).norm(dim=-1)
             fits = fits | (together & nearer)
+        carried = None  # sflow.warm_follow: (rows, their latents) carried along person 1
         if together is not None and (cfg.warm_play or others is not None) and together.any():
             rows = together.nonzero().flatten()
             reaction = pipe.decode(z[rows], frames, reaction=True)
             changed = torch.zeros(len(rows), dtype=torch.bool, device=rows.device)
+            played = None
             if cfg.warm_play:  # at person 1's pace, whatever the reaction's own: it fits
                 own = floor_velocity(reaction, fps).norm(dim=-1).clamp_min(MOVING)
-                reaction = play_at(reaction, velocity[rows].norm(dim=-1) / own)
-                if cfg.warm_follow is None:  # (else once it follows them, below)
-                    reaction = clear_of(reaction, leader[rows])  # level partners touched
+                played = play_at(reaction, velocity[rows].norm(dim=-1) / own)
+                reaction = clear_of(played, leader[rows])  # level partners touched
                 fits, changed = fits | together, ~changed
-            if extend is not None and bool(extend[rows].any()):  # the file's next place
-                go = extend[rows]
-                shift = torch.nan_to_num(ends[rows] - floor_start(reaction)) * go[:, None]
-                reaction = place_features(reaction, 0.0, shift[:, 0], shift[:, 1])
-                changed = changed | go
-            if cfg.warm_follow is not None:  # along person 1's path where it turns
-                reaction = follow_leader(reaction, leader[rows], cfg.warm_follow)
-                reaction = clear_of(reaction, leader[rows])
-            if others is not None:  # on someone's spot (or body): beyond them
-                moved = beyond(reaction, others[rows], None if bodies is None
-                               else bodies[rows], cfg.warm_clear)  # fmt: skip
-                if extend is not None:  # a file's next place is off everyone's spot already
-                    moved = torch.where(extend[rows][:, None, None], reaction, moved)
-                changed = changed | (moved != reaction).any(dim=2).any(dim=1)
-                reaction = moved
+            reaction, moved = _placed(reaction, rows, ends, extend, others, bodies, cfg.warm_clear)
+            changed = changed | moved
             if bool(changed.any()):
                 z = z.clone()
                 z[rows[changed]] = pipe._encode(reaction[changed]).to(z)
+            if cfg.warm_follow is not None and played is not None:  # where person 1 turns
+                turns = turning(leader[rows], cfg.warm_follow)
+                if bool(turns.any()):
+                    sub = rows[turns]
+                    along = follow_leader(_placed(played[turns], sub, ends, extend)[0],
+                                          leader[sub])  # fmt: skip
+                    along = _placed(clear_of(along, leader[sub]), sub, ends, extend, others,
+                                    bodies, cfg.warm_clear, file=False)[0]  # fmt: skip
+                    carried = (sub, pipe._encode(along).to(z))
         if answers_first and bank.lags and cfg.warm_timing > 0:
             z, lag, stored = answers(bank, first, frames, z, cfg, generator,
                                      pipe.sflow.latent_norm.normalize, prompt,
                                      others)  # fmt: skip
             waits = (lag, stored)
-        return z, 0, fits, waits
+        if carried is not None:  # proposed carried; the straight one kept to fall back on
+            sub, along = carried
+            carried, z = (sub, z[sub]), z.clone()
+            z[sub] = along
+        return z, 0, fits, waits, carried
     z, nfe = pflow_proposal(pipe, decoded, text, uncond, generator, guidance, own)
-    return z, nfe, torch.ones(first.shape[0], dtype=torch.bool, device=first.device), None
+    ones = torch.ones(first.shape[0], dtype=torch.bool, device=first.device)
+    return z, nfe, ones, None, None
+
+
+def _placed(reaction: Tensor, rows: Tensor, ends: Tensor | None, extend: Tensor | None,
+            others: Tensor | None = None, bodies: Tensor | None = None, clear: float = 0.0,
+            file: bool = True) -> tuple[Tensor, Tensor]:  # fmt: skip
+    """Reactions (R, T, 262) of the batch's ``rows`` moved to a single file's next place
+    (``ends``, where ``extend``; not with ``file`` False: they are there already) and, with
+    ``others``, beyond people 2..k - 1 (:func:`umf.clearance.beyond`; a file's walker is off
+    their spots already), and (R,) which of them moved."""
+    moved = torch.zeros(len(rows), dtype=torch.bool, device=reaction.device)
+    go = None
+    if extend is not None and bool(extend[rows].any()):
+        go = extend[rows]
+        if file:
+            shift = torch.nan_to_num(ends[rows] - floor_start(reaction)) * go[:, None]
+            reaction = place_features(reaction, 0.0, shift[:, 0], shift[:, 1])
+            moved = go.clone()
+    if others is not None:  # on someone's spot (or body): beyond them
+        off = beyond(reaction, others[rows], None if bodies is None else bodies[rows], clear)
+        if go is not None:
+            off = torch.where(go[:, None, None], reaction, off)
+        moved = moved | (off != reaction).any(dim=2).any(dim=1)
+        reaction = off
+    return reaction, moved
 
 
 def answers(bank: Any, first: Tensor, frames: int, z: Tensor, cfg: Any, generator: Any,
@@ -501,10 +499,11 @@ def sample_added(
                     prev[:, 0], frames, reaction=not answers_first)  # fmt: skip
                 everyone = torch.cat([features_to_joints(first)[:, None], bodies], dim=1)
                 touching = touches(decoded, everyone, cfg.warm_clear)
-        guess, m, fits, lag = proposal(pipe, w, decoded, text, uncond, generator,
-                                       pflow_guidance, own, mirror=mirror,
-                                       answers_first=answers_first, leader=leader,
-                                       others=others, bodies=bodies, ends=ends)  # fmt: skip
+        guess, m, fits, lag, straight = proposal(pipe, w, decoded, text, uncond, generator,
+                                                 pflow_guidance, own, mirror=mirror,
+                                                 answers_first=answers_first, leader=leader,
+                                                 others=others, bodies=bodies,
+                                                 ends=ends)  # fmt: skip
         guess, answer = timed_proposal(pipe, guess, prev, lag, frames, leader)
         turned = torch.zeros_like(answer)
         together = together_rows(pipe, decoded, leader) if others is not None else None
@@ -525,6 +524,7 @@ def sample_added(
         # person k >= 3: a context of 2+ people, which the S-Flow never trained on, pulls
         # the second pass back to where a partner of person 1 stands (sflow.warm_start_group)
         later = cfg.warm_start_group if prev.shape[1] > 1 and cfg.warm_start_group else None
+        twins = None if straight is None else twin(generator)  # the same draws, again
         again, n = pipe.sflow.sample(prev, mask, text, uncond, warm=guess, warm_t=later, **kw)
         nfe += m + n
         take = warm_rows(decoded, fits, pipe.config.fps, cfg.warm_glide) | answer | turned
@@ -534,5 +534,10 @@ def sample_added(
             take = take | touching
         if ends is not None and together is not None:  # a file's walker takes its place there
             take = take | (together & torch.isfinite(ends).all(dim=-1))
+        if straight is not None:  # carried along a turning person 1, but onto someone?
+            again, n = fall_back(pipe, again, straight, take & ~answer, prev, mask, text,
+                                 uncond, frames, leader, bodies, {**kw, "generator": twins},
+                                 later)  # fmt: skip
+            nfe += n
         w = torch.where(take[:, None, None], again, w)
     return w, nfe
