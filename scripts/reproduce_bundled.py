@@ -49,7 +49,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261217"
+NAME = "umf-small-bandai-20261218"
 PLACE_WEIGHT = 0.1
 
 
@@ -169,7 +169,7 @@ NAMED = ["pflow.person_guidance=3.0", "sflow.person_guidance=3.0", "sflow.warm_s
          "sflow.warm_together=0.8", "vae.pin_leader_start=true", "sflow.warm_play=true",
          "sflow.warm_apart=true", "sflow.warm_take=0.7", "sflow.warm_margin=0.15",
          "sflow.warm_start_group=0.7", "sflow.warm_clear=0.55",
-         "sflow.warm_extend=true"]  # fmt: skip
+         "sflow.warm_extend=true", "sflow.warm_follow=20"]  # fmt: skip
 
 
 class Stage(NamedTuple):
@@ -285,7 +285,9 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     # caption (a group's) retrieves among the reactions of its nearest captions only, and
     # person k >= 3 is sampled again from 0.7 on the path towards their proposal;
     # results/umf-small-bandai-20261215: and kept 0.55 m off everybody's whole body;
-    # results/umf-small-bandai-20261217: a single file's walker starts behind the one before
+    # results/umf-small-bandai-20261217: a single file's walker starts behind the one before;
+    # results/umf-small-bandai-20261218: a partner carried along a leader who turns over 20
+    # degrees, sampled again as if straight where that pass touches someone
     name = variant("name", work / "runs" / "leader" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]

@@ -211,11 +211,14 @@ def test_runners_start_level_with_their_leader(pipe):
 def test_runners_keep_pace_with_their_leader(pipe):
     """The reactions issue's target for runners: "Two people run side by side." and "Three
     people run side by side." (4 s, seeds 0-7), every follower's delivered start-to-end
-    floor speed within 20 % of the leader's and none more than 1 m behind, in at least 13
+    floor speed within 20 % of the leader's and none more than 1 m behind, in at least 15
     of the 16 scenes. 20261211 kept 5 and 5: the bank's real partners run slower than the
     P-Flow's leaders, and a third runner started on the second one's spot; 20261212 plays
     the partner at the leader's pace (``sflow.warm_play``) and keeps person 3 off person 2's
-    spot (``sflow.warm_apart``): 7 and 7 (results/umf-small-bandai-20261212)."""
+    spot (``sflow.warm_apart``): 7 and 7 (results/umf-small-bandai-20261212). Seed 7's
+    leader turns 50 degrees and its straight partners ended 1.2 m behind; 20261218 carries
+    them along the leader's path (``sflow.warm_follow``): 8 and 8
+    (results/umf-small-bandai-20261218)."""
     fps, missed = pipe.config.fps, []
     for n, prompt in ((2, "Two people run side by side."), (3, "Three people run side by side.")):
         for seed in range(8):
@@ -226,7 +229,7 @@ def test_runners_keep_pace_with_their_leader(pipe):
             behind = (p[0, -1] - p[1:, -1]) @ heading
             if (np.abs(speed[1:] / speed[0] - 1.0) > 0.2).any() or (behind > 1.0).any():
                 missed.append((n, seed, np.round(speed[1:] / speed[0], 2), np.round(behind, 2)))
-    assert len(missed) <= 3, missed
+    assert len(missed) <= 1, missed
 
 
 def test_a_4_second_runner_leader_runs_straight(pipe):
