@@ -291,3 +291,27 @@ def test_evaluator_locations(setup, tmp_path):
         R.load_evaluators(ev / "single", None, "cpu")
     with pytest.raises(UMFError, match="not found"):
         R.load_evaluators(tmp_path / "nowhere", None, "cpu")
+
+
+def test_kinds_whose_reading_changes_get_an_any_order_row():
+    """A kind whose accuracy read in any order differs from the strict one for some source
+    gets a "kind: K, any order" row (a source without that reading shows "—"); a kind the
+    order does not change gets none."""
+    from umf.eval.markdown import relations_markdown
+
+    def acc(side: float, loose_side: float | None) -> dict:
+        out = {"scene_accuracy": 0.5, "scene_accuracy_ci": 0.1, "check_accuracy": 0.8,
+               "kind_accuracy": 0.8, "num_scenes": 4, "num_checks": 8, "by_relation": {},
+               "by_kind": {"side": {"accuracy": side, "count": 4},
+                           "no_contact": {"accuracy": 0.75, "count": 4}}}  # fmt: skip
+        if loose_side is not None:
+            kinds = {"side": {"accuracy": loose_side, "count": 4},
+                     "no_contact": {"accuracy": 0.75, "count": 4}}  # fmt: skip
+            out["any_order"] = {"scene_accuracy": 0.75, "by_relation": {}, "by_kind": kinds}
+        return out
+
+    text = relations_markdown({"groups": {"m": acc(0.5, 1.0), "ablation": acc(0.25, None)}})
+    assert "| kind: side, any order | 1.000 | — |" in text
+    assert "no_contact, any order" not in text
+    text = relations_markdown({"groups": {"m": acc(0.5, 0.5)}})
+    assert "side, any order" not in text

@@ -147,9 +147,28 @@ def relations_markdown(relations: dict[str, dict[str, Any]]) -> str:
                      + [fmt(a["any_order"]["by_relation"].get(r)) if "any_order" in a else "—"
                         for a in by_source.values()]
                      for r in rels if r in INTERCHANGEABLE]  # fmt: skip
+            rows += [[f"kind: {k}, any order"] + [_any_order_kind(a, k) for a in by_source.values()]
+                     for k in kinds if _order_matters(by_source.values(), k)]  # fmt: skip
         title = f"**{name}** ({first['num_scenes']} scenes, {first['num_checks']} checks)"
         parts.append(title + "\n\n" + md_table(["", *sources], rows))
     return "\n\n".join(parts)
+
+
+def _any_order_kind(acc: dict[str, Any], kind: str) -> str:
+    """A source's accuracy on checks of ``kind`` read in any order of the people a caption
+    leaves open ("—" where it has no such reading)."""
+    by_kind = acc.get("any_order", {}).get("by_kind", {})
+    return fmt(by_kind[kind]["accuracy"]) if kind in by_kind else "—"
+
+
+def _order_matters(accs, kind: str) -> bool:
+    """Whether reading people in any order changes some source's accuracy on ``kind``:
+    only those kinds get an "any order" row."""
+    for a in accs:
+        loose = a.get("any_order", {}).get("by_kind", {}).get(kind)
+        if loose is not None and loose["accuracy"] != a["by_kind"].get(kind, {}).get("accuracy"):
+            return True
+    return False
 
 
 def physics_markdown(physics: dict[str, dict[str, Any]]) -> str:
@@ -287,7 +306,8 @@ def render_markdown(results: dict[str, Any]) -> str:
         "A group's record was composed in one order of its people (each next person of a "
         "row on the previous one's left), which its caption does not name; the row \"people "
         'the caption leaves open in any order" reads each group in the order of those '
-        "people that passes most checks.",
+        'people that passes most checks, and so does a "kind: ..., any order" row, given '
+        "for each kind that reading changes.",
         "",
     ]
     if results.get("relations"):
