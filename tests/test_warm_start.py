@@ -569,12 +569,12 @@ def test_warm_follow_proposes_a_row_carried_and_keeps_its_straight_proposal(mode
     calls, turns = [], {"now": False}
 
     def spy_follow(features, lead, turn=0.0):
-        calls.append(("follow", lead.clone()))
+        calls.append(("follow", lead.clone(), features.clone()))
         return features + 2.0
 
     def spy_clear(features, lead, distance=0.4):
         calls.append(("clear", features.clone()))
-        return features
+        return features + 0.5
 
     def spy_turning(lead, d):
         calls.append(("turning", d))
@@ -599,12 +599,25 @@ def test_warm_follow_proposes_a_row_carried_and_keeps_its_straight_proposal(mode
     assert calls[2][1] == 20.0  # the turn beyond which a row is carried
     torch.testing.assert_close(calls[5][1], leader[:1])  # row 0's leader only
     reaction = pipe.decode(bank.latents[30][:1], 30, reaction=True)
+    torch.testing.assert_close(calls[5][2], reaction)  # the played motion, not the cleared
     torch.testing.assert_close(calls[6][1], reaction + 2.0)  # cleared once carried
     (z0, s0), (z1, s1), (z2, s2) = out
     assert s0 is None and s1 is None and torch.equal(z1, z0)  # as without the option
     rows, z_straight = s2
     assert rows.tolist() == [0] and torch.equal(z_straight[0], z0[0])
     assert torch.equal(z2[1], z0[1]) and not torch.allclose(z2[0], z0[0])
+    # a row that answers (a wait retrieved for its caption) keeps the answer: never carried
+    answer = torch.randn(2, *pipe.vae.latent_shape)
+
+    def answering(bank, first, frames, z, cfg, generator, scale, prompt, others=None):
+        return answer, torch.tensor([8.0, 0.0]), [30, 30]
+
+    monkeypatch.setattr(umf.warm_start, "answers", answering)
+    monkeypatch.setattr(bank, "lags", {30: torch.zeros(1)})
+    monkeypatch.setattr(pipe.config.sflow, "warm_timing", 8)
+    gens = [torch.Generator().manual_seed(s) for s in range(2)]
+    z, *_, straight = proposal(pipe, first, decoded, text, uncond, gens, None, {}, leader=leader)
+    assert straight is None and torch.equal(z, answer)
 
 
 def test_follow_leader_turns_a_straight_walker_with_a_turning_leader():

@@ -83,10 +83,12 @@ def fall_back(
     (``straight``: those rows and their proposal before carrying,
     :func:`umf.warm_start.proposal`) and is
     ``taken`` sampled again from the straight proposal, with the same draws (``kw``'s
-    generators: :func:`twin`), where the carried pass comes within the relation checks'
-    contact distance of person 1 (``leader``) or of people 2..k - 1 (``bodies``) at some
-    frame, and the NFE. The S-Flow never saw a partner turn (no training crop turns more
-    than 20 degrees): from a carried proposal its pass may run onto a turning person 1."""
+    generators, one per row as the pipeline passes them: :func:`twin`; one generator for the
+    batch, or none, draws anew), where the carried pass comes within the relation checks'
+    contact distance of person 1 (``leader``) or, where ``sflow.warm_clear`` gives their
+    ``bodies``, of people 2..k - 1 at some frame, and the NFE. The S-Flow never saw a
+    partner turn (no training crop turns more than 20 degrees): from a carried proposal its
+    pass may run onto a turning person 1."""
     rows, z = straight
     keep = taken[rows]
     rows, z = rows[keep], z[keep]

@@ -273,6 +273,9 @@ def proposal(
                                      pipe.sflow.latent_norm.normalize, prompt,
                                      others)  # fmt: skip
             waits = (lag, stored)
+        if carried is not None and waits is not None:  # an answer keeps its own reaction
+            keep = (waits[0][carried[0]] <= 0).to(carried[0].device)
+            carried = (carried[0][keep], carried[1][keep]) if bool(keep.any()) else None
         if carried is not None:  # proposed carried; the straight one kept to fall back on
             sub, along = carried
             carried, z = (sub, z[sub]), z.clone()
@@ -534,7 +537,7 @@ def sample_added(
             take = take | touching
         if ends is not None and together is not None:  # a file's walker takes its place there
             take = take | (together & torch.isfinite(ends).all(dim=-1))
-        if straight is not None:  # carried along a turning person 1, but onto someone?
+        if straight is not None and leader is not None:  # carried, but onto someone?
             again, n = fall_back(pipe, again, straight, take & ~answer, prev, mask, text,
                                  uncond, frames, leader, bodies, {**kw, "generator": twins},
                                  later)  # fmt: skip
