@@ -315,3 +315,18 @@ def test_kinds_whose_reading_changes_get_an_any_order_row():
     assert "no_contact, any order" not in text
     text = relations_markdown({"groups": {"m": acc(0.5, 0.5)}})
     assert "side, any order" not in text
+
+
+def test_single_protocol_loads_both_models_and_says_why_it_cannot_score(setup, tmp_path):
+    """research/single_protocol.py: a model and a variant, the fixture's evaluator, and the
+    protocol's own reason where a split holds too few single-person items (the fixture's
+    test split has one), as one line, before any JSON is written."""
+    from conftest import load_script
+
+    out = tmp_path / "single.json"
+    with pytest.raises(SystemExit, match="single-person protocol skipped: test items 1"):
+        load_script("single_protocol").main([
+            str(setup / "tiny" / "model"), str(setup / "reaction"), "--corpus",
+            str(setup / "corpus"), "--split", "test", "--replications", "1", "--evaluator",
+            str(setup / "evrun"), "--json", str(out)])  # fmt: skip
+    assert not out.exists()
