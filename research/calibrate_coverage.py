@@ -57,6 +57,8 @@ def wilson(k: int, n: int, z: float = 1.96) -> tuple[float, float]:
 
 def test_report(known: list[dict], unseen: list[dict]) -> dict:
     """Rates of the model's own verdicts (``known``) on paraphrases and unseen actions."""
+    if not known or not unseen:
+        raise SystemExit("both lists need at least one line")
     fk = sum(not c["known"] for c in known)
     fu = sum(not c["known"] for c in unseen)
     return {

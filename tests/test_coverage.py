@@ -73,6 +73,11 @@ def test_vocabulary_round_trips_and_a_broken_one_is_one_line(tmp_path):
     del doc["groups"]  # a vocabulary written before group relations
     (tmp_path / "vocabulary.json").write_text(json.dumps(doc))
     assert Vocabulary.load(tmp_path).groups == []
+    for key in ("groups", "actions"):  # a list field that is no list: one line, not a traceback
+        broken = {**doc, key: None}
+        (tmp_path / "vocabulary.json").write_text(json.dumps(broken))
+        with pytest.raises(UMFError, match=f"corrupt vocabulary \\({key}\\)"):
+            Vocabulary.load(tmp_path)
     assert torch.allclose(w.embeddings, v.embeddings, atol=1e-3)  # stored in fp16
     assert Vocabulary.load(tmp_path / "nothing") is None
     doc = json.loads((tmp_path / "vocabulary.json").read_text())

@@ -86,10 +86,14 @@ class Vocabulary:
         contact = doc.get("contact", {})
         if not isinstance(contact, dict):
             raise UMFError(f"{model_dir}: corrupt vocabulary (contact)")
-        return cls(phrases, emb, str(doc.get("encoder", "")), threshold,
-                   list(doc.get("actions", [])), list(doc.get("styles", [])),
-                   list(doc.get("relations", [])), list(doc.get("groups", [])),
-                   contact)  # fmt: skip
+        names = {}
+        for key in ("actions", "styles", "relations", "groups"):
+            value = doc.get(key, [])
+            if not isinstance(value, list):
+                raise UMFError(f"{model_dir}: corrupt vocabulary ({key})")
+            names[key] = [str(v) for v in value]
+        return cls(phrases, emb, str(doc.get("encoder", "")), threshold, **names,
+                   contact=contact)  # fmt: skip
 
     def score(self, prompts: Sequence[str], encoder) -> list[dict[str, Any]]:
         """Coverage of each prompt (module notes), in the encoder the vocabulary was built with."""
