@@ -19,10 +19,7 @@ from __future__ import annotations
 
 import argparse
 import json
-import os
-import shutil
 import sys
-import tempfile
 from pathlib import Path
 
 import torch
@@ -30,7 +27,9 @@ from safetensors import safe_open
 from safetensors.torch import save_file
 
 from umf.errors import UMFError
-from umf.pipeline import UMFPipeline
+
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+from model_variant import derive_model
 
 MODULES = ("vae", "pflow", "sflow")
 
@@ -67,35 +66,13 @@ def write_interpolated(base: Path, tuned: Path, dst: Path, alpha: float, module:
     for d in (base, tuned):
         if not (d / f"{module}.safetensors").exists() or not (d / "format.json").exists():
             raise UMFError(f"{d}: not a model directory with {module}.safetensors")
-    if dst.exists():
-        raise UMFError(f"{dst} exists; choose a new directory")
-    (a, meta), (b, _) = (
-        _read(base / f"{module}.safetensors"),
-        _read(tuned / f"{module}.safetensors"),
-    )
-    mixed = interpolate(a, b, alpha)
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    tmp = Path(tempfile.mkdtemp(prefix=f".{dst.name}.", dir=dst.parent))
-    try:
-        for f in base.iterdir():
-            if f.is_file() and f.name not in ("format.json", f"{module}.safetensors"):
-                try:
-                    os.link(f, tmp / f.name)
-                except OSError:
-                    shutil.copy2(f, tmp / f.name)
-        save_file(mixed, str(tmp / f"{module}.safetensors"), metadata=meta)
-        fmt = json.loads((base / "format.json").read_text())
-        names = [json.loads((d / "format.json").read_text()).get("name") for d in (base, tuned)]
-        fmt["interpolated"] = {"base": names[0], "tuned": names[1], "alpha": alpha,
-                               "module": module}  # fmt: skip
-        fmt["name"] = name or dst.name
-        (tmp / "format.json").write_text(json.dumps(fmt, indent=2) + "\n")
-        UMFPipeline.from_pretrained(tmp)  # it must load
-        tmp.rename(dst)
-    except BaseException:
-        shutil.rmtree(tmp, ignore_errors=True)
-        raise
-    return dst
+    a, meta = _read(base / f"{module}.safetensors")
+    mixed = interpolate(a, _read(tuned / f"{module}.safetensors")[0], alpha)
+    names = [json.loads((d / "format.json").read_text()).get("name") for d in (base, tuned)]
+    record = {"interpolated": {"base": names[0], "tuned": names[1], "alpha": alpha,
+                               "module": module}}  # fmt: skip
+    write = lambda path: save_file(mixed, str(path), metadata=meta)  # noqa: E731
+    return derive_model(base, dst, {f"{module}.safetensors": write}, name, record)
 
 
 def main() -> None:

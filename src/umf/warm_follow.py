@@ -44,16 +44,13 @@ def row_features(joints: Any, like: Tensor) -> Tensor:
     return assemble_features(x, joints_to_rot6d(x))
 
 
-def follow_leader(features: Tensor, leader: Tensor, turn: float = 0.0) -> Tensor:
+def follow_leader(features: Tensor, leader: Tensor) -> Tensor:
     """Features (B, T, 262) carried along the paths of ``leader`` (B, T, 262), both in person
-    1's frame (:func:`umf.path_follow.follow_path`), rotations recovered from the new joints;
-    a row whose leader's path turns ``turn`` degrees or less (:func:`path_turn`) is kept."""
-    out = []
-    for f, g in zip(features, leader, strict=True):
-        lead = row_joints(g)
-        moved = f if path_turn(lead) <= turn else row_features(follow_path(row_joints(f), lead), f)
-        out.append(moved.to(f.device))
-    return torch.stack(out)
+    1's frame (:func:`umf.path_follow.follow_path`), rotations recovered from the new joints.
+    Which rows to carry is :func:`turning`'s to say."""
+    return torch.stack([
+        row_features(follow_path(row_joints(f), row_joints(g)), f).to(f.device)
+        for f, g in zip(features, leader, strict=True)])  # fmt: skip
 
 
 def turning(leader: Tensor, turn: float) -> Tensor:
