@@ -4,11 +4,11 @@ The bundled model was made in steps across several sessions (a VAE and both flow
 GPU, then fine-tunes on a CPU; each step has a results page). This runs the same steps
 in order, with the options those pages and the shipped ``config.json`` record, into
 ``--work`` (default ``~/umf-runs/bundled``), and writes the model to ``WORK/model``
-(the last ten training stages, ``teach``, ``reteach``, ``rebalance``, ``settle``, ``pace``,
-``person``, ``person2``, ``place``, ``gait`` and ``leader``, and the bank of real reactions
-the last stage, ``name``, writes
-(``umf train reactions``, 3-5 min), need the full corpus of ``make corpus`` with
-``../shared``: Bandai and the CMU and DeepMimic mocap):
+(the last eleven training stages, ``teach``, ``reteach``, ``rebalance``, ``settle``,
+``pace``, ``person``, ``person2``, ``place``, ``gait``, ``leader`` and ``jump``, and the bank
+of real reactions the last stage, ``name``, writes (``umf train reactions``, 3-5 min),
+need the full corpus of ``make corpus`` with ``../shared``: Bandai and the CMU and DeepMimic
+mocap):
 
     python scripts/reproduce_bundled.py [--work DIR] [--corpus out/corpus] [--dry-run]
         [--max-steps N]   # every training stage cut to N steps, one latent pass: a quick
@@ -18,9 +18,9 @@ Each stage leaves ``WORK/done/<stage>`` when it ends; a killed run started again
 the finished stages and resumes the training it was in (``umf train --resume``). The
 first stage (VAE, P-Flow, S-Flow from scratch: 2,000 x 128 and 5,600 x 512 twice) wants a
 GPU (about 10 min on an H200; many hours on this 2-core CPU, not measured). The CPU fine-tunes
-after it take about 4.1 h here (2 h of them the S-Flow; ``settle`` 20 min, ``pace``
+after it take about 4.3 h here (2 h of them the S-Flow; ``settle`` 20 min, ``pace``
 18 min, for the per-person prompts ``person`` 41 min and ``person2`` 23 min, ``place``
-12 min, ``gait`` 12 min and ``leader`` 20 min). ``pace``
+12 min, ``gait`` 12 min, ``leader`` 20 min and ``jump`` 11 min). ``pace``
 was trained on a corpus of the composer of its day (partners of side-by-side scenes at the
 leader's pace and in step; but for its fallback, changed since, 24 of 3,000 training
 scenes), ``person`` and ``person2`` on the current one (with ``stand_facing`` and the own
@@ -49,7 +49,7 @@ import sys
 from pathlib import Path
 from typing import NamedTuple
 
-NAME = "umf-small-bandai-20261218"
+NAME = "umf-small-bandai-20261219"
 PLACE_WEIGHT = 0.1
 
 
@@ -159,6 +159,11 @@ GAIT = [*PLACE, *sets("train_sflow", repeat_scene_gait=True)]
 LEADER = sets("train_pflow", max_steps=1200, lr=0.0002, real_repeats=60,
               relation_repeats=["stand_facing=8"], val_every=400, ckpt_every=100,
               repeat_leader_gait=True)  # fmt: skip
+
+# results/umf-small-bandai-20261219: the same again from the leader stage's model, the jump
+# served 4 times as often (wise-pflow-20261206: a 4 s jump lifts the pelvis 15 cm in 8 of 8
+# seeds, 6 before)
+JUMP = [*LEADER, *sets("train_pflow", label_repeats=["jump=4"])]
 
 
 # the last stage's sampling options (results/umf-small-bandai-20261204b, 20261206, 20261207)
@@ -270,6 +275,7 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     out.append(one_flow("place", work / "runs" / "person2" / "model", "sflow", PLACE))
     out.append(one_flow("gait", work / "runs" / "place" / "model", "sflow", GAIT))
     out.append(one_flow("leader", work / "runs" / "gait" / "model", "pflow", LEADER))
+    out.append(one_flow("jump", work / "runs" / "leader" / "model", "pflow", JUMP))
     # results/umf-small-bandai-20261204b: own prompts guided at 3 apart from the scene's 2;
     # results/umf-small-bandai-20261206: gliding people 2..N warm-started from a real
     # reaction travelling as they do, from the bank of the corpus's train scenes;
@@ -287,8 +293,9 @@ def stages(work: Path, corpus: Path, max_steps: int | None = None) -> list[Stage
     # results/umf-small-bandai-20261215: and kept 0.55 m off everybody's whole body;
     # results/umf-small-bandai-20261217: a single file's walker starts behind the one before;
     # results/umf-small-bandai-20261218: a partner carried along a leader who turns over 20
-    # degrees, sampled again as if straight where that pass touches someone
-    name = variant("name", work / "runs" / "leader" / "model", work / "model",
+    # degrees, sampled again as if straight where that pass touches someone;
+    # results/umf-small-bandai-20261219: the jump stage's P-Flow, nothing else new
+    name = variant("name", work / "runs" / "jump" / "model", work / "model",
                    *[a for o in NAMED for a in ("--set", o)], "--name", NAME)  # fmt: skip
     reactions = [*umf, "train", "reactions", "--model", str(work / "model"), *c]
     out.append(name._replace(commands=[*name.commands, reactions]))

@@ -48,6 +48,7 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
         "place",
         "gait",
         "leader",
+        "jump",
         "name",
     ]
     cfg = family_config("small")
@@ -133,7 +134,11 @@ def test_the_stages_rebuild_the_shipped_config(tmp_path):
     assert leader[leader.index("--from") + 1] == str(tmp_path / "runs" / "gait" / "model")
     assert leader[leader.index("--stages") + 1] == "pflow"
     assert "train_pflow.repeat_leader_gait=true" in _sets(leader)
-    final = tmp_path / "runs" / "leader" / "model"
+    jump = stages["jump"][0]
+    assert jump[jump.index("--from") + 1] == str(tmp_path / "runs" / "leader" / "model")
+    assert jump[jump.index("--stages") + 1] == "pflow"
+    assert _sets(jump) == [*_sets(leader), "train_pflow.label_repeats=[jump=4]"]
+    final = tmp_path / "runs" / "jump" / "model"
     assert stages["name"][0][2:4] == [str(final), str(tmp_path / "model")]
     shipped = json.loads((ROOT / "src" / "umf" / "assets" / "model" / "format.json").read_text())
     assert stages["name"][0][-1] == rb.NAME == shipped["name"]
@@ -182,7 +187,7 @@ def test_stages_the_final_config_overwrites_keep_their_documented_options(tmp_pa
     cut = {st.name: st.commands for st in _script().stages(tmp_path, Path("out/corpus"), 3)}
     trained = {"gpu": ("vae", "pflow", "sflow"), "hg": ("pflow",), "dec": ("vae",),
                "mix": ("pflow",), "person": ("pflow", "sflow"), "person2": ("pflow", "sflow"),
-               "place": ("sflow",), "gait": ("sflow",), "leader": ("pflow",),
+               "place": ("sflow",), "gait": ("sflow",), "leader": ("pflow",), "jump": ("pflow",),
                **{n: ("sflow",) for n in ("rn0.5", "rn0.5b", "rn0.25c", "rn0.125d")}}  # fmt: skip
     for name, what in trained.items():
         last = {o.split("=")[0]: o.split("=")[1] for o in _sets(cut[name][0])}  # last one wins
@@ -200,7 +205,7 @@ def test_dry_run_prints_every_stage_and_runs_nothing(tmp_path):
     names = [line[3:] for line in out.stdout.splitlines() if line.startswith("== ")]
     assert names == ["gpu", "sampling", "rn0.5", "rn0.5b", "rn0.25c", "rn0.125d", "hg", "dec",
                      "mix", "teach", "reteach", "rebalance", "settle", "pace", "steps", "person",
-                     "person2", "place", "gait", "leader", "name"]  # fmt: skip
+                     "person2", "place", "gait", "leader", "jump", "name"]  # fmt: skip
     assert not (tmp_path / "w").exists()
     missing = subprocess.run(
         [sys.executable, str(SCRIPT), "--corpus", str(tmp_path / "nowhere"), "--work",
