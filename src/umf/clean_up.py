@@ -11,6 +11,7 @@ import torch
 from umf.anchoring import anchor_people
 from umf.kinematics import Bodies, fit_bodies
 from umf.separation import separate_people, touching_distances
+from umf.untangle import untangle
 
 
 def clean_up(
@@ -35,7 +36,9 @@ def clean_up(
        :func:`umf.separation.touching_distances`) only as far as real partners ever keep
        apart, so partners may touch;
     3. ``fit``: one rigid body each, planted feet pinned and people with ``clean`` kept off
-       the ``floor`` (:mod:`umf.kinematics`).
+       the ``floor`` (:mod:`umf.kinematics`); with ``contact`` (and ``separate``), people
+       2..N with ``clean`` then move their limbs out of the bodies of those before them
+       (:mod:`umf.untangle`).
 
     Returns the (N, 3) separation shifts and the bodies (None without ``fit``).
     """
@@ -96,14 +99,17 @@ def clean_up_scenes(
         return shifts, [None] * b
     if merge is None:
         merge = device is not None and torch.device(device).type == "cuda"
-    if not merge:
-        return shifts, [fit_bodies(p, c, floor, clean) for p, c in zip(placed, contacts,
-                                                                        strict=True)]  # fmt: skip
     flags = [bool(clean)] * n if isinstance(clean, bool) else [bool(c) for c in clean]
-    every = fit_bodies(np.concatenate(placed), contacts.reshape(b * n, *contacts.shape[2:]),
-                       floor, flags * b, device=device)  # fmt: skip
-    people = [slice(i * n, (i + 1) * n) for i in range(b)]
-    return shifts, [Bodies(every.offsets[p], every.rotations[p], every.root[p]) for p in people]
+    if not merge:
+        bodies = [fit_bodies(p, c, floor, clean) for p, c in zip(placed, contacts, strict=True)]
+    else:
+        every = fit_bodies(np.concatenate(placed), contacts.reshape(b * n, *contacts.shape[2:]),
+                           floor, flags * b, device=device)  # fmt: skip
+        people = [slice(i * n, (i + 1) * n) for i in range(b)]
+        bodies = [Bodies(every.offsets[p], every.rotations[p], every.root[p]) for p in people]
+    # a couple let as close as real partners come: limbs moved out of the partner's body
+    return shifts, [untangle(bd, flags, floor) if near[i] and separate and n > 1 else bd
+                    for i, bd in enumerate(bodies)]  # fmt: skip
 
 
 def delivered_joints(

@@ -21,35 +21,16 @@ from typing import Any
 
 import numpy as np
 
-from umf.skeleton import FOOT_LEFT, FOOT_RIGHT, JOINT_NAMES, NUM_JOINTS, PARENTS
-
-# --------------------------------------------------------------------- body capsules
-# One capsule per bone, named by its child joint (bone j runs from PARENTS[j] to j).
-# Radii (m) are a slim adult: about the half-thickness of each body part, so that two
-# real people standing close do not overlap; hands and the top of the skull are not
-# covered (the skeleton ends at the wrists and the head joint), which keeps the measure
-# conservative: what it reports as penetration is really penetration.
-BONE_RADII: dict[str, float] = {
-    "l_hip": 0.09, "r_hip": 0.09,  # pelvis -> hips: the pelvis block
-    "spine1": 0.11, "spine2": 0.11, "spine3": 0.11,  # abdomen and chest (half depth)
-    "l_knee": 0.07, "r_knee": 0.07,  # thighs
-    "l_ankle": 0.05, "r_ankle": 0.05,  # shins
-    "l_foot": 0.04, "r_foot": 0.04,  # feet (ankle -> toes)
-    "neck": 0.05,
-    "l_collar": 0.06, "r_collar": 0.06,  # upper chest to the shoulder line
-    "head": 0.10,  # neck -> head joint
-    "l_shoulder": 0.055, "r_shoulder": 0.055,  # collar -> shoulder
-    "l_elbow": 0.045, "r_elbow": 0.045,  # upper arms
-    "l_wrist": 0.035, "r_wrist": 0.035,  # forearms
-}  # fmt: skip
-_BONE_CHILDREN = np.arange(1, NUM_JOINTS)
-_BONE_PARENTS = np.array(PARENTS[1:])
-
-
-def bone_radii() -> np.ndarray:
-    """Capsule radii (21,) in bone order (bone j-1 ends at joint j)."""
-    return np.array([BONE_RADII[JOINT_NAMES[j]] for j in _BONE_CHILDREN])
-
+from umf.capsules import (  # noqa: F401  (re-exported: the metrics are read from here)
+    _BONE_CHILDREN,
+    _BONE_PARENTS,
+    BONE_RADII,
+    as_numpy,
+    bone_radii,
+    capsule_penetration,
+    segment_distance,
+)
+from umf.skeleton import FOOT_LEFT, FOOT_RIGHT, NUM_JOINTS
 
 PENETRATION_THRESHOLD = 0.01  # m: deeper overlaps count as a penetrating frame
 
@@ -63,83 +44,6 @@ GROUND_HEIGHTS = (0.10, 0.05)
 SKATE_SPEED = 0.5  # m/s: a planted foot moving faster than this is skating
 FLOAT_HEIGHT = 0.05  # m: the lowest foot joint above this means the person floats
 GROUND_PENETRATION_THRESHOLD = 0.01  # m: a joint deeper below the floor counts
-
-
-def as_numpy(joints: Any) -> np.ndarray:
-    """float64 array from numpy or (CPU) torch joints."""
-    if hasattr(joints, "detach"):
-        joints = joints.detach().cpu().numpy()
-    return np.asarray(joints, dtype=np.float64)
-
-
-# --------------------------------------------------------------------- geometry
-def segment_distance(
-    p1: np.ndarray, q1: np.ndarray, p2: np.ndarray, q2: np.ndarray, eps: float = 1e-12
-) -> np.ndarray:
-    """Closest distance between segments p1-q1 and p2-q2 (broadcast over leading axes).
-
-    Ericson, *Real-Time Collision Detection*, 5.1.9: minimise over the two segment
-    parameters, clamp, and re-project. Parallel segments (zero determinant) take
-    s = 0 and are then clamped like the general case, which is exact for them too;
-    zero-length segments degrade to point-segment and point-point distances.
-    """
-    d1, d2, r = q1 - p1, q2 - p2, p1 - p2
-    a = (d1 * d1).sum(-1)
-    e = (d2 * d2).sum(-1)
-    b = (d1 * d2).sum(-1)
-    c = (d1 * r).sum(-1)
-    f = (d2 * r).sum(-1)
-    a_ok, e_ok = a > eps, e > eps
-    safe_a, safe_e = np.where(a_ok, a, 1.0), np.where(e_ok, e, 1.0)
-    denom = a * e - b * b
-    parallel = denom <= eps * np.maximum(a * e, eps)
-    s = np.where(parallel, 0.0, np.clip((b * f - c * e) / np.where(parallel, 1.0, denom), 0, 1))
-    t = (b * s + f) / safe_e
-    s = np.where(
-        t < 0, np.clip(-c / safe_a, 0, 1), np.where(t > 1, np.clip((b - c) / safe_a, 0, 1), s)
-    )
-    t = np.clip(t, 0, 1)
-    # degenerate segments: a point against a segment, or two points
-    s = np.where(a_ok, s, 0.0)
-    t = np.where(a_ok, t, np.clip(f / safe_e, 0, 1))
-    s = np.where(~e_ok & a_ok, np.clip(-c / safe_a, 0, 1), s)
-    t = np.where(e_ok, t, 0.0)
-    gap = (p1 + d1 * s[..., None]) - (p2 + d2 * t[..., None])
-    return np.sqrt((gap * gap).sum(-1))
-
-
-def capsule_penetration(a: np.ndarray, b: np.ndarray) -> np.ndarray:
-    """Deepest capsule overlap (T,) in metres between two people a, b (T, 22, 3).
-
-    Per frame: max over the 21 x 21 bone pairs of (radius_i + radius_j - segment
-    distance), clipped at 0. Two exact culls keep it cheap: frames whose bounding
-    spheres (around the pelvis, through the farthest joint plus the largest radius) do
-    not touch are skipped, and so are bone pairs whose midpoint distance minus both half
-    lengths (a lower bound of the segment distance) already exceeds their radii sum.
-    """
-    a, b = as_numpy(a), as_numpy(b)
-    out = np.zeros(a.shape[0])
-    radii = bone_radii()
-    reach_a = np.linalg.norm(a - a[:, :1], axis=-1).max(-1) + radii.max()
-    reach_b = np.linalg.norm(b - b[:, :1], axis=-1).max(-1) + radii.max()
-    near = np.flatnonzero(np.linalg.norm(a[:, 0] - b[:, 0], axis=-1) < reach_a + reach_b)
-    if near.size == 0:
-        return out
-    pa, qa = a[near][:, _BONE_PARENTS], a[near][:, _BONE_CHILDREN]  # (T', 21, 3)
-    pb, qb = b[near][:, _BONE_PARENTS], b[near][:, _BONE_CHILDREN]
-    mid_gap = np.linalg.norm((pa + qa)[:, :, None] - (pb + qb)[:, None], axis=-1) / 2
-    half_a = np.linalg.norm(qa - pa, axis=-1) / 2
-    half_b = np.linalg.norm(qb - pb, axis=-1) / 2
-    reach = radii[:, None] + radii[None, :]
-    lower = mid_gap - half_a[:, :, None] - half_b[:, None, :]
-    t, i, j = np.nonzero(lower < reach)  # candidate (frame, bone a, bone b)
-    if t.size == 0:
-        return out
-    depth = reach[i, j] - segment_distance(pa[t, i], qa[t, i], pb[t, j], qb[t, j])
-    deepest = np.zeros(near.size)
-    np.maximum.at(deepest, t, depth)
-    out[near] = deepest
-    return out
 
 
 def penetration_matrix(joints: Any) -> np.ndarray:

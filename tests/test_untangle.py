@@ -1,0 +1,113 @@
+"""Bones moved out of a partner's body: less overlap, rigid bones, nothing else touched."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from umf.capsules import capsule_penetration, overlaps
+from umf.kinematics import fit_bodies
+from umf.untangle import MAX_PUSH, SPREAD, pushes, spread, untangle
+
+
+def _couple(walk: np.ndarray, gap: float) -> np.ndarray:
+    """Person 1 walking; person 2 the same walk turned to face them, ``gap`` m ahead of
+    person 1's pelvis at every frame (the same floor path, so torsos and arms meet)."""
+    turned = walk.copy()
+    turned[..., [0, 2]] *= -1  # half a turn about the vertical through the origin...
+    pelvis = walk[:, :1].copy()
+    pelvis[..., 1] = 0.0
+    turned = turned - turned[:, :1] * np.array([1.0, 0.0, 1.0]) + pelvis  # ...on person 1's path
+    turned[..., 2] += gap
+    return np.stack([walk, turned])
+
+
+def test_a_couple_overlapping_is_pulled_out_with_rigid_bones(real_joints):
+    """Person 2 stands 0.3 m in front of person 1, facing them: torsos and arms overlap.
+    untangle lowers the mean overlap by more than half, keeps every bone's length, moves
+    only person 2, and only the frames that overlapped (and those a push fades into)."""
+    couple = _couple(real_joints.numpy()[:40], 0.3)
+    bodies = fit_bodies(couple, floor=None, clean=False)
+    before = bodies.joints()
+    depth = capsule_penetration(before[1], before[0])
+    assert depth.mean() > 0.02
+    out = untangle(bodies, movable=True, floor=None)
+    after = out.joints()
+    assert capsule_penetration(after[1], after[0]).mean() < 0.5 * depth.mean()
+    assert np.array_equal(after[0], before[0])  # person 1 never moves
+    np.testing.assert_array_equal(out.offsets, bodies.offsets)  # the same bones
+    from umf.skeleton import PARENTS
+
+    lengths = [np.linalg.norm(j[:, :, 1:] - j[:, :, PARENTS[1:]], axis=-1) for j in (before, after)]
+    np.testing.assert_allclose(lengths[1], lengths[0], atol=1e-9)
+    # the pelvis' floor path is kept
+    np.testing.assert_allclose(after[1, :, 0, [0, 2]], before[1, :, 0, [0, 2]], atol=1e-6)
+
+
+def test_people_apart_are_left_exactly_as_they_were(real_joints):
+    couple = _couple(real_joints.numpy()[:30], 1.5)
+    bodies = fit_bodies(couple, floor=0.0, clean=True)
+    out = untangle(bodies)
+    np.testing.assert_array_equal(out.rotations, bodies.rotations)
+    np.testing.assert_array_equal(out.root, bodies.root)
+
+
+def test_a_person_not_to_be_cleaned_is_not_moved(real_joints):
+    """``react``: a user's own person 2 (movable False) keeps its motion, overlap or not."""
+    couple = _couple(real_joints.numpy()[:20], 0.3)
+    bodies = fit_bodies(couple, floor=None, clean=False)
+    out = untangle(bodies, movable=[True, False], floor=None)
+    np.testing.assert_array_equal(out.joints(), bodies.joints())
+
+
+def test_pushes_follow_the_contact_normal_and_are_capped():
+    """Two parallel vertical forearm-like bodies side by side: person a's pushes point away
+    from b (+x), are no longer than MAX_PUSH, and the pelvis gets none."""
+    a = np.zeros((3, 22, 3))
+    a[..., 1] = np.linspace(0.0, 1.7, 22)
+    b = a.copy()
+    a[..., 0] += 0.05  # 5 cm apart: every capsule pair of the two columns overlaps
+    hit = overlaps(a, b)
+    assert hit["frame"].size and np.all(hit["normal"][:, 0] > 0)
+    push = pushes(a, [b])
+    size = np.linalg.norm(push, axis=-1)
+    assert size.max() <= MAX_PUSH + 1e-12 and (size[:, 1:] > 0).mean() > 0.8
+    assert not push[:, 0].any()
+    assert np.all(push[..., 0] >= 0) and np.all(push[..., 0][size > 0] > 0)
+    far = a.copy()
+    far[..., 0] += 2.0
+    assert not pushes(far, [b]).any()
+
+
+@pytest.mark.parametrize("frame", [0, 10, 19])
+def test_a_push_fades_in_and_out_and_keeps_its_peak(frame):
+    push = np.zeros((20, 22, 3))
+    push[frame, 5] = [0.04, 0.0, 0.0]
+    out = spread(push)
+    assert out[frame, 5, 0] == pytest.approx(0.04)
+    for lag in range(1, SPREAD + 2):
+        for t in (frame - lag, frame + lag):
+            if 0 <= t < 20:
+                want = 0.04 * max(0.0, 1.0 - lag / (SPREAD + 1))
+                assert out[t, 5, 0] == pytest.approx(want)
+    assert not np.delete(out, 5, axis=1).any()
+
+
+def test_the_clean_up_untangles_couples_who_touch_only(real_joints, monkeypatch):
+    """clean_up with ``contact`` (a prompt worded like a touching take) untangles the couple
+    after the fit; without it (every other prompt, kept apart by the separation anyway)
+    the result is the fit's, bit for bit."""
+    import umf.clean_up as cu
+
+    couple = _couple(real_joints.numpy()[:40], 0.3).astype(np.float32)
+    contacts = np.zeros((2, 40, 4), dtype=np.float32)
+    touch = {"pelvis_m": 0.25, "closest_m": 0.02}
+    _, untangled = cu.clean_up(couple, contacts, contact=touch)
+    _, plain = cu.clean_up(couple, contacts)
+    monkeypatch.setattr(cu, "untangle", lambda bodies, *a, **k: bodies)
+    _, fitted = cu.clean_up(couple, contacts, contact=touch)
+    _, plain_again = cu.clean_up(couple, contacts)
+    np.testing.assert_array_equal(plain.joints(), plain_again.joints())
+    j, f = untangled.joints(), fitted.joints()
+    assert capsule_penetration(f[1], f[0]).mean() > 0.01
+    assert capsule_penetration(j[1], j[0]).mean() < 0.5 * capsule_penetration(f[1], f[0]).mean()
