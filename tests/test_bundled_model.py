@@ -490,3 +490,22 @@ def test_umf_info_names_the_touching_takes_and_a_prompt_worded_like_one():
                                    "--prompt", "Two people walk side by side."])  # fmt: skip
     salsa, walk = [x for x in out.stdout.splitlines() if x.startswith("'Two people")]
     assert "people touch" in salsa and "people touch" not in walk
+
+
+def test_a_rerolled_salsa_partner_is_untangled_like_a_generated_one(pipe, monkeypatch):
+    """``umf reroll`` of a salsa couple's person 2 goes through the same clean-up as a
+    generated partner: its bones are moved out of person 1's (umf.untangle), so it overlaps
+    person 1 less than the same re-roll left tangled; person 1 is untouched either way."""
+    import umf.reroll as rr
+    from umf.eval.physics import capsule_penetration
+
+    (scene,) = pipe("Two people dance salsa together.", num_people=2, seconds=4.0, seed=2)
+    depth = {}
+    for name in ("with", "without"):
+        if name == "without":
+            monkeypatch.setattr(rr, "untangle", lambda bodies, *a, **k: bodies)
+        again = rr.reroll_person(pipe, scene, 2, seed=0)
+        assert np.array_equal(again.joints[0], scene.joints[0])
+        depth[name] = capsule_penetration(again.joints[1], again.joints[0]).mean()
+    assert depth["without"] > 0.02, depth  # 3.7 cm on average, seed 0
+    assert depth["with"] < 0.5 * depth["without"], depth  # 1.0 cm

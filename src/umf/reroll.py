@@ -7,7 +7,9 @@ the VAE (posterior means, as in S-Flow's training), and S-Flow samples person k 
 scene's prompt. Person 1 is re-rolled the same way, as a reaction to the others: P-Flow
 takes no context, so a new person 1 from it would ignore everyone who reacted to the old
 one. The new person goes through the pipeline's clean-up on its own (anchored, shifted
-apart from the others, fitted); the others' joints, bodies and features are copied.
+apart from the others, fitted, and with a prompt worded like a touching take its bones
+moved out of the others', :mod:`umf.untangle`); the others' joints, bodies and features are
+copied.
 """
 
 from __future__ import annotations
@@ -33,6 +35,7 @@ from umf.scene import Scene
 from umf.separation import separate_people, touching_distances
 from umf.streams import scene_generators
 from umf.text import respell_prompt
+from umf.untangle import untangle
 from umf.validation import check_int, check_request, check_text
 from umf.warm_start import mirror_text, sample_added
 
@@ -121,6 +124,7 @@ def reroll_person(
     floor = float(scene.meta.get("floor", 0.0))
     start = anchor_people(decoded[None], contacts[None], floor) if anchor else decoded[None]
     shift = np.zeros(3, dtype=np.float32)
+    near = None
     if separate:  # the new person last: only its shift is taken, the others stay put
         near = (pipe.coverage([text])[0] or {}).get("contact")
         order = np.concatenate([scene.joints[others], start])
@@ -128,6 +132,12 @@ def reroll_person(
         shift = shifts[-1]
     moved = start + shift
     body = fit_bodies(moved, contacts[None], floor, True)
+    if near and scene.bodies is not None:  # as the clean-up does: out of the others' bodies
+        b = scene.bodies
+        group = Bodies(*(np.concatenate([getattr(b, f)[others], getattr(body, f)])
+                         for f in ("offsets", "rotations", "root")))  # fmt: skip
+        group = untangle(group, [False] * len(others) + [True], floor)
+        body = Bodies(group.offsets[-1:], group.rotations[-1:], group.root[-1:])
     out_joints = scene.joints.copy()
     out_joints[k] = body.joints()[0]
     raw = (scene.raw_joints if scene.raw_joints is not None else scene.joints).copy()
