@@ -79,6 +79,17 @@ def test_pushes_follow_the_contact_normal_and_are_capped():
     assert not pushes(far, [b]).any()
 
 
+def test_a_frame_keeps_its_own_push_beside_a_bigger_one():
+    """A neighbour's larger faded push never replaces a frame's own push (another way)."""
+    push = np.zeros((5, 22, 3))
+    push[2, 7] = [0.01, 0.0, 0.0]
+    push[3, 7] = [0.0, 0.04, 0.0]
+    out = spread(push)
+    np.testing.assert_array_equal(out[2, 7], push[2, 7])
+    np.testing.assert_array_equal(out[3, 7], push[3, 7])
+    assert out[1, 7, 1] > 0  # an unpushed frame takes the larger faded neighbour
+
+
 @pytest.mark.parametrize("frame", [0, 10, 19])
 def test_a_push_fades_in_and_out_and_keeps_its_peak(frame):
     push = np.zeros((20, 22, 3))
@@ -111,3 +122,60 @@ def test_the_clean_up_untangles_couples_who_touch_only(real_joints, monkeypatch)
     j, f = untangled.joints(), fitted.joints()
     assert capsule_penetration(f[1], f[0]).mean() > 0.01
     assert capsule_penetration(j[1], j[0]).mean() < 0.5 * capsule_penetration(f[1], f[0]).mean()
+
+
+def test_only_frames_near_an_overlap_change_and_only_they_are_lifted(real_joints):
+    """Person 2 meets person 1 in frames 30-40 only (1.5 m ahead before and after): frames
+    more than SPREAD from them keep their rotations and root bit for bit, even one sunk
+    under the floor (only a moved frame is lifted back onto it)."""
+    walk = real_joints.numpy()[:70]
+    near, far = _couple(walk, 0.3), _couple(walk, 1.5)
+    couple = far.copy()
+    couple[:, 30:41] = near[:, 30:41]
+    bodies = fit_bodies(couple, floor=None, clean=False)
+    bodies.root[1, 5, 1] -= 0.2  # sunk, far from the overlap
+    out = untangle(bodies, floor=0.0)
+    still = np.r_[0 : 30 - SPREAD, 41 + SPREAD : 70]
+    np.testing.assert_array_equal(out.rotations[:, still], bodies.rotations[:, still])
+    np.testing.assert_array_equal(out.root[:, still], bodies.root[:, still])
+    j, b = out.joints(), bodies.joints()
+    window = slice(30, 41)
+    assert (capsule_penetration(j[1, window], j[0, window]).mean()
+            < 0.5 * capsule_penetration(b[1, window], b[0, window]).mean())  # fmt: skip
+    assert j[1, 30:41, :, 1].min() >= -1e-9  # moved frames stand on the floor
+
+
+def test_a_push_goes_to_the_end_of_the_bone_that_is_inside():
+    """A forearm whose wrist is inside the partner's chest and whose elbow is clear: the
+    wrist is pushed (almost) the whole way, the elbow a little."""
+    b = np.zeros((2, 22, 3))
+    b[..., 1] = np.linspace(0.0, 1.7, 22)
+    a = b + np.array([2.0, 0.0, 0.0])
+    a[:, 18] = [0.40, 1.2, 0.0]  # left elbow, clear of the column
+    a[:, 20] = [0.02, 1.2, 0.0]  # left wrist, 2 cm from it: inside
+    push = pushes(a, [b])
+    wrist, elbow = np.linalg.norm(push[:, 20], axis=-1), np.linalg.norm(push[:, 18], axis=-1)
+    assert np.all(wrist > 0.04) and np.all(wrist > 3 * elbow)
+    assert np.all(push[:, 20, 0] > 0)  # out of the column, along +x
+
+
+def test_each_person_moves_out_of_those_before_them_only(real_joints):
+    """Three people: persons 2 and 3 overlap each other, person 1 is far from both. Person 2
+    owes nothing to person 3 (it was there first) and stays bit for bit; person 3 moves."""
+    walk = real_joints.numpy()[:20]
+    pair = _couple(walk, 0.3)
+    group = np.stack([walk + np.array([5.0, 0.0, 0.0]), pair[0], pair[1]])
+    bodies = fit_bodies(group, floor=None, clean=False)
+    out = untangle(bodies, floor=None)
+    np.testing.assert_array_equal(out.joints()[:2], bodies.joints()[:2])
+    j = out.joints()
+    assert (
+        capsule_penetration(j[2], j[1]).mean()
+        < 0.5 * capsule_penetration(bodies.joints()[2], bodies.joints()[1]).mean()
+    )
+
+
+def test_movable_must_name_every_person(real_joints):
+    bodies = fit_bodies(_couple(real_joints.numpy()[:5], 0.3), floor=None, clean=False)
+    with pytest.raises(ValueError, match="movable names 1 people"):
+        untangle(bodies, movable=[True])

@@ -1,7 +1,7 @@
 """Body capsules: one per bone, and how deep two people's capsules overlap.
 
 The evaluation's inter-person penetration (:mod:`umf.eval.physics`) and the clean-up's
-rule for couples who touch (:mod:`umf.separation`) measure bodies the same way, so the
+untangling of couples who touch (:mod:`umf.untangle`) measure bodies the same way, so the
 geometry lives below both.
 """
 
@@ -145,7 +145,15 @@ def overlaps(a: np.ndarray, b: np.ndarray) -> dict[str, np.ndarray]:
     gap = on_a - on_b
     dist = np.linalg.norm(gap, axis=-1)
     depth = reach[i, j] - dist
+    # bones that cross have no closest-point direction: take their midpoints', and where
+    # those coincide too, the pelvises'
+    for fallback in (
+        (pa[t, i] + qa[t, i] - pb[t, j] - qb[t, j]) / 2,
+        a[near][t, 0] - b[near][t, 0],
+    ):
+        flat = np.linalg.norm(gap, axis=-1) < 1e-9
+        gap[flat] = fallback[flat]
     keep = depth > 0
-    normal = gap[keep] / np.maximum(dist[keep], 1e-9)[:, None]
+    normal = gap[keep] / np.maximum(np.linalg.norm(gap[keep], axis=-1), 1e-9)[:, None]
     return {"frame": near[t[keep]], "bone": i[keep], "along": s[keep], "depth": depth[keep],
             "normal": normal}  # fmt: skip

@@ -58,21 +58,23 @@ def pushes(own: np.ndarray, others: Sequence[np.ndarray], margin: float = MARGIN
 
 
 def spread(push: np.ndarray, frames: int | None = None) -> np.ndarray:
-    """Pushes (T, 22, 3) faded in and out over ``frames`` each side: each frame takes the
-    largest of its neighbours' pushes scaled by a triangle (1 at the frame, 0 at
-    ``frames`` + 1 away; default :data:`SPREAD`), per joint, so a pushed frame keeps its
-    whole push."""
+    """Pushes (T, 22, 3) faded in and out over ``frames`` each side (default
+    :data:`SPREAD`): a joint that has a push of its own at a frame keeps it whole; one that
+    has none takes the largest of its neighbours' pushes scaled by a triangle (1 at their
+    frame, 0 at ``frames`` + 1 away)."""
     frames = SPREAD if frames is None else frames
     out = push.copy()
-    size = np.linalg.norm(out, axis=-1)
+    own = np.abs(push).sum(-1) > 0
+    size = np.linalg.norm(push, axis=-1)
     for lag in range(1, frames + 1):
         w = 1.0 - lag / (frames + 1)
         later, earlier = slice(lag, None), slice(None, -lag)
         for src, dst in ((later, earlier), (earlier, later)):
             cand = push[src] * w
-            bigger = np.linalg.norm(cand, axis=-1) > size[dst]
-            out[dst][bigger] = cand[bigger]
-            size[dst] = np.where(bigger, np.linalg.norm(cand, axis=-1), size[dst])
+            length = np.linalg.norm(cand, axis=-1)
+            take = (length > size[dst]) & ~own[dst]
+            out[dst][take] = cand[take]
+            size[dst] = np.where(take, length, size[dst])
     return out
 
 
@@ -82,16 +84,20 @@ def untangle(
     floor: float | None = 0.0,
     rounds: int = ROUNDS,
 ) -> Bodies:
-    """``bodies`` with each person k >= 2 marked ``movable`` moved limb by limb out of
+    """``bodies`` with each person k >= 2 marked ``movable`` moved bone by bone out of
     persons 1..k - 1 (person 1 never moves: in ``react`` it is the user's own motion).
-    Frames where nothing overlaps are left exactly as they were; with ``floor``, a frame
-    whose lowest joint a push took under it is lifted back onto it."""
+    Frames more than :data:`SPREAD` frames from any overlap are left exactly as they were;
+    with ``floor``, a moved frame whose lowest joint a push took under it is lifted back
+    onto it."""
     n = bodies.num_people
     flags = [bool(movable)] * n if isinstance(movable, bool) else [bool(m) for m in movable]
+    if len(flags) != n:
+        raise ValueError(f"movable names {len(flags)} people, the bodies hold {n}")
     out = Bodies(bodies.offsets.copy(), bodies.rotations.copy(), bodies.root.copy())
     for k in range(1, n):
         if not flags[k]:
             continue
+        touched = np.zeros(out.num_frames, dtype=bool)
         for _ in range(rounds):
             joints = out.joints()
             push = spread(pushes(joints[k], [joints[j] for j in range(k)]))
@@ -110,7 +116,8 @@ def untangle(
             )
             out.rotations[k, moved] = local.numpy()
             out.root[k, moved] = root.numpy()
-        if floor is not None:
-            lowest = out.joints()[k, ..., 1].min(-1)
-            out.root[k, :, 1] += np.maximum(floor - lowest, 0.0)
+            touched[moved] = True
+        if floor is not None and touched.any():
+            lowest = out.joints()[k, touched, :, 1].min(-1)
+            out.root[k, touched, 1] += np.maximum(floor - lowest, 0.0)
     return out
