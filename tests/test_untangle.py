@@ -7,7 +7,7 @@ import pytest
 
 from umf.capsules import capsule_penetration, overlaps
 from umf.kinematics import fit_bodies
-from umf.untangle import MAX_PUSH, SPREAD, pushes, spread, untangle
+from umf.untangle import MAX_PUSH, SMOOTH, SPREAD, pushes, smooth, spread, untangle
 
 
 def _couple(walk: np.ndarray, gap: float) -> np.ndarray:
@@ -126,7 +126,7 @@ def test_the_clean_up_untangles_couples_who_touch_only(real_joints, monkeypatch)
 
 def test_only_frames_near_an_overlap_change_and_only_they_are_lifted(real_joints):
     """Person 2 meets person 1 in frames 30-40 only (1.5 m ahead before and after): frames
-    more than SPREAD from them keep their rotations and root bit for bit, even one sunk
+    more than SPREAD + SMOOTH from them keep their rotations and root bit for bit, even one sunk
     under the floor (only a moved frame is lifted back onto it)."""
     walk = real_joints.numpy()[:70]
     near, far = _couple(walk, 0.3), _couple(walk, 1.5)
@@ -137,7 +137,8 @@ def test_only_frames_near_an_overlap_change_and_only_they_are_lifted(real_joints
     bodies.root[1, 5, 1] -= 0.2  # sunk, far from the overlap
     bodies.root[1, 30:41, 1] -= 0.08  # a little under where it overlaps: lifted back
     out = untangle(bodies, floor=0.0)
-    still = np.r_[0 : 30 - SPREAD, 41 + SPREAD : 70]
+    reach = SPREAD + SMOOTH
+    still = np.r_[0 : 30 - reach, 41 + reach : 70]
     np.testing.assert_array_equal(out.rotations[:, still], bodies.rotations[:, still])
     np.testing.assert_array_equal(out.root[:, still], bodies.root[:, still])
     j = out.joints()
@@ -183,3 +184,17 @@ def test_movable_must_name_every_person(real_joints):
     bodies = fit_bodies(_couple(real_joints.numpy()[:5], 0.3), floor=None, clean=False)
     with pytest.raises(ValueError, match="movable names 1 people"):
         untangle(bodies, movable=[True])
+
+
+def test_smoothing_averages_pushes_and_keeps_a_steady_one():
+    """A steady push stays as it is; a one-frame spike is spread over 2 SMOOTH + 1 frames
+    with triangle weights that sum to the spike (nothing is pushed twice)."""
+    steady = np.zeros((12, 22, 3))
+    steady[:, 4] = [0.0, 0.0, 0.03]
+    np.testing.assert_allclose(smooth(steady), steady)
+    spike = np.zeros((12, 22, 3))
+    spike[6, 4, 0] = 0.03
+    out = smooth(spike)
+    assert out[6, 4, 0] == pytest.approx(0.03 * (SMOOTH + 1) / (SMOOTH + 1) ** 2)
+    assert out[:, 4, 0].sum() == pytest.approx(0.03)
+    assert not out[: 6 - SMOOTH].any() and not out[7 + SMOOTH :].any()
