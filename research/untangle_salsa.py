@@ -1,12 +1,13 @@
 """Salsa couples delivered with and without the clean-up's untangling (umf.untangle).
 
-    python research/untangle_salsa.py [--model DIR] [--seeds 32] [--json FILE]
+    python research/untangle_salsa.py [--model DIR] [--seeds 32] [--rounds R] [--json FILE]
 
 "Two people dance salsa together.", 4 s, seeds 0..N-1, delivered twice: as the pipeline
 delivers it, and with :func:`umf.untangle.untangle` left out of the clean-up. Per run: the
 body capsules' overlap (mean depth, frames deeper than 1 cm; :mod:`umf.eval.physics`), the
 salsa statistics and targets of ``research/teach_report.py``, the couple's jerk and foot
-skating, the largest joint move, and the seconds per scene.
+skating, the largest joint move, and the seconds per scene. ``--rounds``: untangle with
+that many push-and-refine rounds instead of :data:`umf.untangle.ROUNDS`.
 """
 
 from __future__ import annotations
@@ -35,6 +36,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--model", type=Path, default=None)
     ap.add_argument("--seeds", type=int, default=32)
+    ap.add_argument("--rounds", type=int, default=None)
     ap.add_argument("--json", type=Path, default=None)
     args = ap.parse_args()
 
@@ -44,9 +46,11 @@ def main() -> None:
 
     pipe = UMFPipeline.from_pretrained(args.model)
     untangle = clean_up.untangle
+    rounds = {} if args.rounds is None else {"rounds": args.rounds}
     runs = {}
     for name in ("without", "with"):
-        clean_up.untangle = untangle if name == "with" else (lambda bodies, *a, **k: bodies)
+        clean_up.untangle = ((lambda bodies, *a, **k: untangle(bodies, *a, **k, **rounds))
+                             if name == "with" else (lambda bodies, *a, **k: bodies))  # fmt: skip
         try:
             scenes, seconds = couples(pipe, args.seeds)
         finally:

@@ -26,7 +26,7 @@ from umf.capsules import _BONE_CHILDREN, _BONE_PARENTS, overlaps
 from umf.kinematics import Bodies, refine
 from umf.skeleton import NUM_JOINTS
 
-ROUNDS = 8  # push-and-refine rounds per person (3 left 0.64 cm of salsa overlap, 8 0.3)
+ROUNDS = 8  # push-and-refine rounds per person (salsa, seeds 0-31: 3 left 0.64 cm, 8 0.41)
 MARGIN = 0.005  # m pushed beyond the overlap: the refinement lands a little short
 SPREAD = 5  # frames each side a push fades over (a triangle): no jerk where it starts
 SMOOTH = 2  # frames each side the pushes are then averaged over (a triangle): an overlap's
@@ -50,12 +50,17 @@ def pushes(own: np.ndarray, others: Sequence[np.ndarray], margin: float = MARGIN
         hit = overlaps(own, other)
         push = hit["normal"] * (hit["depth"] + margin)[:, None]
         along = hit["along"][:, None]
-        for joint, part in ((_BONE_PARENTS[hit["bone"]], 1 - along),
-                            (_BONE_CHILDREN[hit["bone"]], along)):  # fmt: skip
-            for f, j, p in zip(hit["frame"], joint, push * part, strict=True):
-                n = float(np.linalg.norm(p))
-                if n > size[f, j]:
-                    size[f, j], out[f, j] = n, p
+        frame = np.concatenate([hit["frame"], hit["frame"]])
+        joint = np.concatenate([_BONE_PARENTS[hit["bone"]], _BONE_CHILDREN[hit["bone"]]])
+        part = np.concatenate([push * (1 - along), push * along])
+        length = np.linalg.norm(part, axis=-1)
+        # per (frame, joint): the longest push, the first of equals
+        key = frame * NUM_JOINTS + joint
+        order = np.lexsort((np.arange(key.size), -length, key))
+        first = order[np.r_[True, key[order][1:] != key[order][:-1]]] if key.size else order
+        win = first[length[first] > size[frame[first], joint[first]]]
+        size[frame[win], joint[win]] = length[win]
+        out[frame[win], joint[win]] = part[win]
     out *= np.minimum(1.0, MAX_PUSH / np.maximum(size, 1e-12))[..., None]
     out[:, 0] = 0.0
     return out
@@ -94,6 +99,12 @@ def smooth(push: np.ndarray, width: int | None = None) -> np.ndarray:
     return sum(w * padded[i : i + push.shape[0]] for i, w in enumerate(kernel))
 
 
+def _person(bodies: Bodies, k: int) -> np.ndarray:
+    """Person k's joints (T, 22, 3): the forward kinematics of that one body."""
+    one = slice(k, k + 1)
+    return Bodies(bodies.offsets[one], bodies.rotations[one], bodies.root[one]).joints()[0]
+
+
 def untangle(
     bodies: Bodies,
     movable: Sequence[bool] | bool = True,
@@ -103,9 +114,8 @@ def untangle(
     """``bodies`` with each person k >= 2 marked ``movable`` moved bone by bone out of
     persons 1..k - 1 (person 1 never moves: in ``react`` it is the user's own motion).
     Frames more than :data:`SPREAD` + :data:`SMOOTH` frames from any overlap are left
-    exactly as they were;
-    with ``floor``, a moved frame whose lowest joint a push took under it is lifted back
-    onto it."""
+    exactly as they were; with ``floor``, a moved frame whose lowest joint a push took
+    under it is lifted back onto it."""
     n = bodies.num_people
     flags = [bool(movable)] * n if isinstance(movable, bool) else [bool(m) for m in movable]
     if len(flags) != n:
@@ -115,13 +125,14 @@ def untangle(
         if not flags[k]:
             continue
         touched = np.zeros(out.num_frames, dtype=bool)
+        before = list(out.joints()[:k])  # persons 1..k - 1 hold still while k moves
         for _ in range(rounds):
-            joints = out.joints()
-            push = smooth(spread(pushes(joints[k], [joints[j] for j in range(k)])))
+            own = _person(out, k)
+            push = smooth(spread(pushes(own, before)))
             moved = np.flatnonzero(np.abs(push).sum((1, 2)) > 0)
             if moved.size == 0:
                 break
-            target = joints[k, moved] + push[moved]
+            target = own[moved] + push[moved]
             weight = np.where(np.abs(push[moved]).sum(-1) > 0, PUSH_WEIGHT, 1.0)
             local, root = refine(
                 torch.from_numpy(out.rotations[k, moved]),
@@ -135,6 +146,6 @@ def untangle(
             out.root[k, moved] = root.numpy()
             touched[moved] = True
         if floor is not None and touched.any():
-            lowest = out.joints()[k, touched, :, 1].min(-1)
+            lowest = _person(out, k)[touched, :, 1].min(-1)
             out.root[k, touched, 1] += np.maximum(floor - lowest, 0.0)
     return out
